@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: install
-	$(BIN)/montecarlo table1
+	$(BIN)/montecarlo run studies/table1.toml
 
 test: install lint
 	$(BIN)/pytest -m "not slow"

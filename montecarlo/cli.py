@@ -35,6 +35,50 @@ def _cmd_table1(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
+    return value
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must not be negative: {text!r}")
+    return value
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from montecarlo.outputs import write_outputs
+    from montecarlo.report import spec_verdicts
+    from montecarlo.runner import Checkpoints, RunOptions, run_study
+    from montecarlo.study import load_study
+
+    study = load_study(args.study, trials=args.trials, seed=args.seed)
+    out = Path(args.out) if args.out else Path("results") / study.header.name
+    options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
+                         chunk_size=args.chunk_size, progress=not args.quiet,
+                         checkpoint_dir=out.parent / ".checkpoints")
+    result = run_study(study, options)
+    write_outputs(result, out, options)
+    Checkpoints(options.checkpoint_dir, study).remove()
+    verdicts = spec_verdicts(result, result.to_frame())
+    print(f"{study.header.name}: {len(study.points)} grid points written to {out}/ "
+          f"(report.md, summary.csv, plots/)")
+    if verdicts is not None:
+        print(verdicts.to_string(index=False))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="montecarlo",
@@ -47,6 +91,20 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("table1", help="reproduce seed 000, Table 1 and compare with the paper")
     p.add_argument("--json", action="store_true", help="print a JSON list of six rows")
     p.set_defaults(func=_cmd_table1)
+
+    p = sub.add_parser("run", help="run a study file and write results/<study>/")
+    p.add_argument("study", help="study definition (TOML), e.g. studies/table1.toml")
+    p.add_argument("--n-jobs", type=_positive_int, default=2, help="parallel workers (2)")
+    p.add_argument("--backend", choices=("loky", "dask"), default="loky",
+                   help="loky: local processes; dask: a dask.distributed cluster")
+    p.add_argument("--scheduler", help="dask scheduler address (default: start a LocalCluster)")
+    p.add_argument("--trials", type=_positive_int, help="override the trials per grid point")
+    p.add_argument("--seed", type=_nonnegative_int, help="override the study seed")
+    p.add_argument("--out", help="output directory (default results/<study name>)")
+    p.add_argument("--chunk-size", type=_positive_int,
+                   help="trials per task, a multiple of the block size (results do not change)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_run)
     return parser
 
 

@@ -1,0 +1,246 @@
+"""Streaming statistics of per-trial metrics, identical however the trials were split into tasks.
+
+Memory does not grow with the number of trials: each metric keeps
+
+* per block of trials, its count, mean and sum of squared deviations (``n, mean, m2``); the
+  totals combine these with ``math.fsum``, which rounds the exact sum once, so the result does
+  not depend on the order or grouping in which blocks arrived;
+* the minimum and maximum;
+* an integer histogram on a logarithmic grid (1024 bins per octave, relative width 2**-10,
+  from 2**-40 to 2**16 in magnitude, both signs), from which percentiles are read to within half
+  a bin (0.05 %); integer counts add exactly.
+
+Percentiles use the inverted-CDF definition (the ``ceil(p n)``-th smallest value). Their
+distribution-free confidence intervals are order statistics ``[X_(r), X_(s)]`` whose ranks come
+from the binomial distribution of the number of trials below the true percentile; the interval
+ends are read conservatively (outer bin edges), so the coverage is at least the nominal level.
+Where too few trials exist for an interval end, it is NaN: more trials are needed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+MANTISSA_BITS = 10
+MIN_EXP = -40
+MAX_EXP = 16
+_SHIFT = 52 - MANTISSA_BITS
+_BASE = int(np.float64(2.0**MIN_EXP).view(np.int64)) >> _SHIFT
+N_MAG = (MAX_EXP - MIN_EXP) << MANTISSA_BITS
+"""Magnitude bins per sign; the histogram has 2 * N_MAG + 3 bins (see :func:`bin_index`)."""
+N_BINS = 2 * N_MAG + 3
+ZERO_BIN = N_MAG + 1
+
+PERCENTILES = (0.50, 0.90, 0.95, 0.99)
+PERCENTILE_TAGS = tuple(f"p{round(100 * p)}" for p in PERCENTILES)
+VALUE_COLUMNS = ["mean", "std", *(f"{t}{e}" for t in PERCENTILE_TAGS for e in ("", "_lo", "_hi")),
+                 "max"]
+"""Summary columns that carry values in the metric's unit (the rest are counts and labels)."""
+
+
+def bin_index(x: np.ndarray) -> np.ndarray:
+    """Histogram bin of each finite value.
+
+    Layout: 0 = values <= -2**MAX_EXP, 1 .. N_MAG = negative magnitudes (largest first),
+    ZERO_BIN = |x| < 2**MIN_EXP, then positive magnitudes, and N_BINS - 1 = values >= 2**MAX_EXP.
+    """
+    a = np.abs(x)
+    k = (a.view(np.int64) >> _SHIFT) - _BASE
+    k = np.clip(k, -1, N_MAG)  # -1: below range (zero bin), N_MAG: overflow
+    pos = ZERO_BIN + 1 + k
+    neg = ZERO_BIN - 1 - k
+    idx = np.where(x < 0, neg, pos)
+    return np.where(k < 0, ZERO_BIN, idx).astype(np.int64)
+
+
+def _magnitude_edges() -> np.ndarray:
+    """Lower edges of the N_MAG magnitude bins and the upper edge of the last, [N_MAG + 1]."""
+    bits = (np.arange(N_MAG + 1, dtype=np.int64) + _BASE) << _SHIFT
+    return bits.view(np.float64)
+
+
+MAG_EDGES = _magnitude_edges()
+
+
+def abs_histogram(hist: np.ndarray) -> np.ndarray:
+    """Fold a signed histogram into magnitudes: [zero bin, N_MAG magnitude bins, overflow]."""
+    pos = hist[ZERO_BIN + 1 :]
+    neg = hist[:ZERO_BIN][::-1]
+    return np.concatenate([[hist[ZERO_BIN]], pos + neg])
+
+
+def _signed_bin_edges() -> tuple[np.ndarray, np.ndarray]:
+    lo_mag, hi_mag = MAG_EDGES[:-1], MAG_EDGES[1:]
+    lower = np.concatenate([[-np.inf], -hi_mag[::-1], [-MAG_EDGES[0]], lo_mag, [MAG_EDGES[-1]]])
+    upper = np.concatenate([[-MAG_EDGES[-1]], -lo_mag[::-1], [MAG_EDGES[0]], hi_mag, [np.inf]])
+    return lower, upper
+
+
+SIGNED_LOWER, SIGNED_UPPER = _signed_bin_edges()
+"""Edges of every bin of the signed histogram (infinite at the ends)."""
+ABS_LOWER = np.concatenate([[0.0], MAG_EDGES])
+ABS_UPPER = np.concatenate([MAG_EDGES, [np.inf]])
+"""Edges of every bin of the magnitude histogram of :func:`abs_histogram`."""
+
+
+def order_statistic_ranks(n: int, p: float, confidence: float) -> tuple[int, int, int]:
+    """1-based ranks (estimate, lower, upper) for the p-quantile of n trials.
+
+    The estimate is rank ``ceil(p n)``. ``[X_(r), X_(s)]`` covers the true quantile with
+    probability ``P(r <= B <= s - 1) >= confidence``, B ~ Binomial(n, p). A rank outside
+    1..n is returned as 0 or n + 1 (that end of the interval cannot be bounded).
+    """
+    alpha = 1.0 - confidence
+    k = max(1, math.ceil(p * n - 1e-9))
+    r = int(stats.binom.ppf(alpha / 2.0, n, p))
+    s = int(stats.binom.ppf(1.0 - alpha / 2.0, n, p)) + 1
+    return k, r, min(s, n + 1)
+
+
+@dataclass
+class MetricStats:
+    """Streaming statistics of one metric."""
+
+    blocks: dict[int, tuple[int, float, float]] = field(default_factory=dict)
+    minimum: float = math.inf
+    maximum: float = -math.inf
+    hist: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
+
+    def __getstate__(self) -> dict:
+        """Pickle the histogram sparsely (tasks send their statistics between processes)."""
+        state = dict(self.__dict__)
+        nz = np.flatnonzero(self.hist)
+        state["hist"] = (nz, self.hist[nz])
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        nz, counts = state["hist"]
+        hist = np.zeros(N_BINS, np.int64)
+        hist[nz] = counts
+        self.__dict__.update({**state, "hist": hist})
+
+    def add_block(self, block: int, values: np.ndarray) -> None:
+        """Add the finite values of one block (NaN marks an invalid trial and is skipped)."""
+        x = values[np.isfinite(values)]
+        if x.size:
+            mean = float(np.mean(x))
+            self.blocks[block] = (x.size, mean, float(np.sum((x - mean) ** 2)))
+            self.minimum = min(self.minimum, float(x.min()))
+            self.maximum = max(self.maximum, float(x.max()))
+            self.hist += np.bincount(bin_index(x), minlength=N_BINS)
+        else:
+            self.blocks[block] = (0, 0.0, 0.0)
+
+    def merge(self, other: MetricStats) -> None:
+        """Add another accumulator's blocks (blocks must not overlap)."""
+        overlap = self.blocks.keys() & other.blocks.keys()
+        if overlap:
+            raise ValueError(f"blocks {sorted(overlap)} merged twice")
+        self.blocks.update(other.blocks)
+        self.minimum = min(self.minimum, other.minimum)
+        self.maximum = max(self.maximum, other.maximum)
+        self.hist += other.hist
+
+    @property
+    def count(self) -> int:
+        return sum(n for n, _, _ in self.blocks.values())
+
+    def mean_std(self) -> tuple[float, float]:
+        n = self.count
+        if n == 0:
+            return math.nan, math.nan
+        mean = math.fsum(b[0] * b[1] for b in self.blocks.values()) / n
+        if n == 1:
+            return mean, math.nan
+        m2 = math.fsum(b[2] for b in self.blocks.values()) + math.fsum(
+            b[0] * (b[1] - mean) ** 2 for b in self.blocks.values())
+        return mean, math.sqrt(m2 / (n - 1))
+
+    def quantile(self, p: float, of_abs: bool, confidence: float) -> tuple[float, float, float]:
+        """(estimate, lower, upper) of the p-quantile of the values or of their magnitudes."""
+        n = self.count
+        if n == 0:
+            return math.nan, math.nan, math.nan
+        if of_abs:
+            counts, lower, upper = abs_histogram(self.hist), ABS_LOWER, ABS_UPPER
+            straddles = self.minimum <= 0.0 <= self.maximum
+            lo_val = 0.0 if straddles else min(abs(self.minimum), abs(self.maximum))
+            hi_val = max(abs(self.minimum), abs(self.maximum))
+        else:
+            counts, lower, upper = self.hist, SIGNED_LOWER, SIGNED_UPPER
+            lo_val, hi_val = self.minimum, self.maximum
+        cum = np.cumsum(counts)
+
+        def bin_of(rank: int) -> int:
+            return int(np.searchsorted(cum, rank))
+
+        k, r, s = order_statistic_ranks(n, p, confidence)
+        b = bin_of(k)
+        est = float(np.clip(0.5 * (lower[b] + upper[b]), lo_val, hi_val))
+        lo = float(max(lower[bin_of(r)], lo_val)) if r >= 1 else math.nan
+        hi = float(min(upper[bin_of(s)], hi_val)) if s <= n else math.nan
+        return est, lo, hi
+
+
+@dataclass
+class PointStats:
+    """All metrics and invalid counts of one grid point.
+
+    ``metrics`` is keyed by (variant, metric); ``invalid`` by variant, holding the count of
+    invalid trials per reason name plus ``"total"``.
+    """
+
+    metrics: dict[tuple[str, str], MetricStats] = field(default_factory=dict)
+    invalid: dict[str, dict[str, int]] = field(default_factory=dict)
+    blocks: set[int] = field(default_factory=set)
+
+    def add_block(self, block: int, values: dict[tuple[str, str], np.ndarray],
+                  invalid: dict[str, dict[str, int]]) -> None:
+        for key, v in values.items():
+            self.metrics.setdefault(key, MetricStats()).add_block(block, v)
+        self._add_invalid(invalid)
+        self.blocks.add(block)
+
+    def _add_invalid(self, invalid: dict[str, dict[str, int]]) -> None:
+        for variant, counts in invalid.items():
+            mine = self.invalid.setdefault(variant, {})
+            for reason, c in counts.items():
+                mine[reason] = mine.get(reason, 0) + c
+
+    def merge(self, other: PointStats) -> None:
+        for key, m in other.metrics.items():
+            if key in self.metrics:
+                self.metrics[key].merge(m)
+            else:
+                self.metrics[key] = m
+        self._add_invalid(other.invalid)
+        self.blocks |= other.blocks
+
+    def summary(self, signed: dict[str, bool], confidence: float) -> pd.DataFrame:
+        """One row per (variant, metric): counts, moments, percentiles with intervals, max.
+
+        ``signed[metric]`` True means percentiles and max are of the magnitude |x| (the mean and
+        std stay signed), recorded in the column ``percentiles_of``.
+        """
+        rows = []
+        for (variant, metric), m in sorted(self.metrics.items()):
+            of_abs = signed[metric]
+            mean, std = m.mean_std()
+            inv = self.invalid.get(variant, {})
+            row = {"variant": variant, "metric": metric,
+                   "percentiles_of": "abs" if of_abs else "value",
+                   "count": m.count, "invalid": inv.get("total", 0),
+                   **{f"invalid_{k}": v for k, v in sorted(inv.items()) if k != "total"},
+                   "mean": mean, "std": std}
+            for p, tag in zip(PERCENTILES, PERCENTILE_TAGS, strict=True):
+                est, lo, hi = m.quantile(p, of_abs, confidence)
+                row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
+            row["max"] = (max(abs(m.minimum), abs(m.maximum)) if of_abs else m.maximum) \
+                if m.count else math.nan
+            rows.append(row)
+        return pd.DataFrame(rows)

@@ -1,0 +1,148 @@
+"""Error-source distributions and the random streams that feed them.
+
+A source is fixed, uniform on ``center +- bound``, normal ``N(mean, sigma^2)``, or evaluated at
+the two corners ``center +- bound`` (worst case). Draws are *standardised* first (``U(-1, 1)`` or
+``N(0, 1)``) and then scaled, so that common random numbers give the same standardised draws at
+every grid point of a study.
+
+Random streams are derived from one ``np.random.SeedSequence(seed)`` by spawn keys
+``(point, block, source)`` -- or ``(block, source)`` with common random numbers -- so that a trial's
+draws depend on which block of trials it belongs to, never on which worker or task ran it.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy import special
+
+Kind = Literal["fixed", "uniform", "normal", "corners"]
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """A scalar error source (SI units or degrees as the field's name says).
+
+    Attributes
+    ----------
+    kind : {"fixed", "uniform", "normal", "corners"}
+    location : float
+        The fixed value, or the centre / mean.
+    scale : float
+        Half-width (uniform, corners), standard deviation (normal), 0 (fixed).
+    """
+
+    kind: Kind
+    location: float = 0.0
+    scale: float = 0.0
+
+    @property
+    def is_random(self) -> bool:
+        return self.kind in ("uniform", "normal") and self.scale != 0.0
+
+    @property
+    def is_corner(self) -> bool:
+        return self.kind == "corners"
+
+    def from_standard(self, z: np.ndarray) -> np.ndarray:
+        """Scale standardised draws (U(-1, 1), N(0, 1) or corner signs +-1) to this source."""
+        return self.location + self.scale * z
+
+    def worst_case(self) -> Distribution:
+        """The same bounds evaluated at their corners (uniform -> corners)."""
+        if self.kind == "normal" and self.scale != 0.0:
+            raise ValueError("a normal source has no worst case; give it a bound (uniform)")
+        if self.kind == "uniform":
+            return Distribution("corners", self.location, self.scale)
+        return self
+
+
+
+def source_key(name: str) -> int:
+    """Stable integer key of a source name for spawn keys (CRC-32, independent of order)."""
+    return zlib.crc32(name.encode())
+
+
+@dataclass(frozen=True)
+class Streams:
+    """Random streams of one block of trials.
+
+    Parameters
+    ----------
+    seed : int
+        The study seed.
+    point : int
+        Grid point index.
+    block : int
+        Block index within the grid point.
+    common : bool
+        Common random numbers: the same streams at every grid point.
+    """
+
+    seed: int
+    point: int
+    block: int
+    common: bool = True
+
+    def generator(self, source: str) -> np.random.Generator:
+        """The generator of one source in this block."""
+        key = (self.block, source_key(source))
+        if not self.common:
+            key = (self.point, *key)
+        return np.random.Generator(np.random.PCG64(np.random.SeedSequence(self.seed, spawn_key=key)))
+
+    def uniform(self, source: str, n: int) -> np.ndarray:
+        """``n`` standardised uniform draws on [-1, 1)."""
+        return 2.0 * self.generator(source).random(n) - 1.0
+
+    def normal(self, source: str, n: int) -> np.ndarray:
+        """``n`` standard normal draws."""
+        return self.generator(source).standard_normal(n)
+
+    def standard(self, dist: Distribution, source: str, n: int) -> np.ndarray:
+        """Standardised draws for a random source (uniform or normal)."""
+        return self.uniform(source, n) if dist.kind == "uniform" else self.normal(source, n)
+
+
+def corner_signs(first_trial: int, n: int, n_corners: int) -> np.ndarray:
+    """Signs (+-1) of ``n_corners`` corner sources for trials ``first_trial .. first_trial+n-1``.
+
+    Trial ``t`` sits at corner ``t mod 2**n_corners``: bit ``j`` of that number (0 -> -1, 1 -> +1)
+    is the sign of corner source ``j``. Returns shape (n_corners, n).
+    """
+    corner = (np.arange(first_trial, first_trial + n) % (1 << n_corners)).astype(np.int64)
+    bits = (corner[None, :] >> np.arange(n_corners)[:, None]) & 1
+    return 2.0 * bits - 1.0
+
+
+def correlated_pair(
+    dist: Distribution, relation: str | float, streams: Streams, source: str, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Standardised draws of one error source seen by two targets, A and B.
+
+    ``relation`` is "common" (B = A), "independent", or a correlation coefficient rho in [-1, 1].
+    A's draws are the same whatever the relation (they come from stream ``source + ':a'``).
+    Normal sources: ``z_B = rho z_A + sqrt(1 - rho^2) z_2``. Uniform sources keep uniform
+    marginals through a Gaussian copula whose normal correlation ``2 sin(pi rho / 6)`` gives the
+    uniforms a Pearson correlation of exactly rho.
+
+    Returns
+    -------
+    z_a, z_b : ndarray, shape (n,)
+    """
+    rho = {"common": 1.0, "independent": 0.0}.get(relation, relation)  # type: ignore[arg-type]
+    z_a = streams.standard(dist, source + ":a", n)
+    if rho == 1.0:
+        return z_a, z_a
+    z_2 = streams.standard(dist, source + ":b", n)
+    if rho == 0.0:
+        return z_a, z_2
+    if dist.kind == "normal":
+        return z_a, rho * z_a + np.sqrt(1.0 - rho**2) * z_2
+    r = 2.0 * np.sin(np.pi * rho / 6.0)
+    n_a = special.ndtri((z_a + 1.0) / 2.0)
+    n_2 = special.ndtri((z_2 + 1.0) / 2.0)
+    return z_a, 2.0 * special.ndtr(r * n_a + np.sqrt(1.0 - r**2) * n_2) - 1.0
