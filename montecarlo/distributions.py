@@ -92,7 +92,8 @@ class Streams:
         key = (self.block, source_key(source))
         if not self.common:
             key = (self.point, *key)
-        return np.random.Generator(np.random.PCG64(np.random.SeedSequence(self.seed, spawn_key=key)))
+        seq = np.random.SeedSequence(self.seed, spawn_key=key)
+        return np.random.Generator(np.random.PCG64(seq))
 
     def uniform(self, source: str, n: int) -> np.ndarray:
         """``n`` standardised uniform draws on [-1, 1)."""

@@ -125,8 +125,7 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
             ax.grid(alpha=0.3)
         axes[0].set_ylim(bottom=0)
         axes[0].set_ylabel(f"{m.label} [{m.unit}]")
-        handles, labels = axes[0].get_legend_handles_labels()
-        if labels:
+        if axes[0].get_legend_handles_labels()[1]:
             axes[0].legend(fontsize=7, loc="upper left")
         ci = f"{study.header.confidence:.0%}"
         fig.suptitle(f"{study.header.name}: line p50, band p50–p95 (bars: {ci} CI of p95), "

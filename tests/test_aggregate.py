@@ -77,7 +77,7 @@ def test_ranks_match_scipy_quantile_test():
     for n, p in [(100, 0.5), (1000, 0.95), (500, 0.99), (20, 0.9)]:
         x = np.sort(rng.random(n))
         ci = stats.quantile_test(x, q=0.5, p=p).confidence_interval(0.95)
-        k, r, s = agg.order_statistic_ranks(n, p, 0.95)
+        _, r, s = agg.order_statistic_ranks(n, p, 0.95)
         assert (x[r - 1] if r >= 1 else -np.inf) == ci.low or (r < 1 and np.isnan(ci.low))
         assert (x[s - 1] if s <= n else np.inf) == ci.high or (s > n and np.isnan(ci.high))
 
