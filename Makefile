@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all lint clean
+.PHONY: install run test test-all lint nightly clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,6 +22,9 @@ test: install lint
 
 test-all: install lint
 	$(BIN)/pytest
+
+nightly: install
+	$(BIN)/montecarlo nightly
 
 lint: install
 	$(BIN)/ruff check .

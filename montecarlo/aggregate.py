@@ -69,9 +69,7 @@ MAG_EDGES = _magnitude_edges()
 
 def abs_histogram(hist: np.ndarray) -> np.ndarray:
     """Fold a signed histogram into magnitudes: [zero bin, N_MAG magnitude bins, overflow]."""
-    pos = hist[ZERO_BIN + 1 :]
-    neg = hist[:ZERO_BIN][::-1]
-    return np.concatenate([[hist[ZERO_BIN]], pos + neg])
+    return np.concatenate([[hist[ZERO_BIN]], hist[ZERO_BIN + 1:] + hist[:ZERO_BIN][::-1]])
 
 
 def _signed_bin_edges() -> tuple[np.ndarray, np.ndarray]:
@@ -102,9 +100,13 @@ def order_statistic_ranks(n: int, p: float, confidence: float) -> tuple[int, int
     return k, r, min(s, n + 1)
 
 
+COARSE_SHIFT = 5
+"""Plots get 2**(MANTISSA_BITS - COARSE_SHIFT) = 32 bins per octave (3 % wide)."""
+
+
 @dataclass
 class MetricStats:
-    """Streaming statistics of one metric."""
+    """Streaming statistics of one metric while its grid point is being computed."""
 
     blocks: dict[int, tuple[int, float, float]] = field(default_factory=dict)
     minimum: float = math.inf
@@ -113,10 +115,8 @@ class MetricStats:
 
     def __getstate__(self) -> dict:
         """Pickle the histogram sparsely (tasks send their statistics between processes)."""
-        state = dict(self.__dict__)
         nz = np.flatnonzero(self.hist)
-        state["hist"] = (nz, self.hist[nz])
-        return state
+        return {**self.__dict__, "hist": (nz, self.hist[nz])}
 
     def __setstate__(self, state: dict) -> None:
         nz, counts = state["hist"]
@@ -161,6 +161,15 @@ class MetricStats:
             b[0] * (b[1] - mean) ** 2 for b in self.blocks.values())
         return mean, math.sqrt(m2 / (n - 1))
 
+    def value_range(self, of_abs: bool) -> tuple[float, float]:
+        """Smallest and largest value (or magnitude)."""
+        if not of_abs:
+            return self.minimum, self.maximum
+        hi = max(abs(self.minimum), abs(self.maximum))
+        lo = 0.0 if self.minimum <= 0.0 <= self.maximum else min(abs(self.minimum),
+                                                                  abs(self.maximum))
+        return lo, hi
+
     def quantile(self, p: float, of_abs: bool, confidence: float) -> tuple[float, float, float]:
         """(estimate, lower, upper) of the p-quantile of the values or of their magnitudes."""
         n = self.count
@@ -168,12 +177,9 @@ class MetricStats:
             return math.nan, math.nan, math.nan
         if of_abs:
             counts, lower, upper = abs_histogram(self.hist), ABS_LOWER, ABS_UPPER
-            straddles = self.minimum <= 0.0 <= self.maximum
-            lo_val = 0.0 if straddles else min(abs(self.minimum), abs(self.maximum))
-            hi_val = max(abs(self.minimum), abs(self.maximum))
         else:
             counts, lower, upper = self.hist, SIGNED_LOWER, SIGNED_UPPER
-            lo_val, hi_val = self.minimum, self.maximum
+        lo_val, hi_val = self.value_range(of_abs)
         cum = np.cumsum(counts)
 
         def bin_of(rank: int) -> int:
@@ -186,10 +192,33 @@ class MetricStats:
         hi = float(min(upper[bin_of(s)], hi_val)) if s <= n else math.nan
         return est, lo, hi
 
+    def coarse_histogram(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Magnitude histogram at 32 bins per octave: occupied (lower, upper, counts)."""
+        a = abs_histogram(self.hist)
+        mag = a[1:-1].reshape(-1, 1 << COARSE_SHIFT).sum(axis=1)
+        edges = MAG_EDGES[:: 1 << COARSE_SHIFT]
+        lower = np.concatenate([[0.0], edges[:-1], [MAG_EDGES[-1]]])
+        upper = np.concatenate([[MAG_EDGES[0]], edges[1:], [np.inf]])
+        counts = np.concatenate([[a[0]], mag, [a[-1]]])
+        nz = np.flatnonzero(counts)
+        return lower[nz], upper[nz], counts[nz]
+
+
+@dataclass(frozen=True)
+class PointResult:
+    """What is kept of a finished grid point: its summary rows and coarse histograms.
+
+    ``summary`` values are in SI units/radians; ``histograms`` maps (variant, metric) to the
+    occupied magnitude bins (lower, upper, counts).
+    """
+
+    summary: pd.DataFrame
+    histograms: dict[tuple[str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
 
 @dataclass
 class PointStats:
-    """All metrics and invalid counts of one grid point.
+    """All metrics and invalid counts of one grid point, while it is being computed.
 
     ``metrics`` is keyed by (variant, metric); ``invalid`` by variant, holding the count of
     invalid trials per reason name plus ``"total"``.
@@ -240,7 +269,11 @@ class PointStats:
             for p, tag in zip(PERCENTILES, PERCENTILE_TAGS, strict=True):
                 est, lo, hi = m.quantile(p, of_abs, confidence)
                 row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
-            row["max"] = (max(abs(m.minimum), abs(m.maximum)) if of_abs else m.maximum) \
-                if m.count else math.nan
+            row["max"] = m.value_range(of_abs)[1] if m.count else math.nan
             rows.append(row)
         return pd.DataFrame(rows)
+
+    def finalize(self, signed: dict[str, bool], confidence: float) -> PointResult:
+        """The compact result of a finished point (the dense histograms are dropped)."""
+        return PointResult(self.summary(signed, confidence),
+                           {k: m.coarse_histogram() for k, m in self.metrics.items()})

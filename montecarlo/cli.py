@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 
@@ -79,6 +80,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_nightly(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from montecarlo.nightly import run_nightly
+
+    passed, checks = run_nightly(Path(args.studies), Path(args.out), args.n_jobs,
+                                 progress=not args.quiet)
+    for c in checks:
+        print(f"{'pass' if c.passed else 'FAIL'}  {c.name}: {c.value} (expected {c.expected})")
+    print(f"nightly: {sum(c.passed for c in checks)}/{len(checks)} checks pass; "
+          f"report {args.out}/report.md")
+    return 0 if passed else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="montecarlo",
@@ -105,6 +120,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="trials per task, a multiple of the block size (results do not change)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("nightly", help="rerun Table 1 and the trend checks; exit 1 on regression")
+    p.add_argument("--studies", default="studies", help="directory with table1.toml, trends.toml")
+    p.add_argument("--out", default="results/nightly", help="output directory")
+    p.add_argument("--n-jobs", type=_positive_int, default=2)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_nightly)
     return parser
 
 
@@ -119,7 +141,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def entry_point() -> None:
     """Console-script entry point."""
-    sys.exit(main())
+    try:
+        code = main()
+        sys.stdout.flush()
+    except BrokenPipeError:  # e.g. `montecarlo table1 | head`
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = 0
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from matplotlib.colors import LogNorm, Normalize
 from matplotlib.figure import Figure
 
-from montecarlo import aggregate as agg
 from montecarlo.runner import StudyResult
 from montecarlo.study import Study
 
@@ -65,12 +65,33 @@ def _spec_text(study: Study) -> str:
     return f"spec: {s.statistic} ≤ {s.limit:g} {study.metric(s.metric).unit}"
 
 
-def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str, Figure]]:
-    """One figure per swept parameter: the metric's percentiles against it, a panel per variant.
+def _select(data: pd.DataFrame, keys: list[str], values: tuple) -> pd.DataFrame:
+    for k, v in zip(keys, values, strict=True):
+        data = data[data[k] == v]
+    return data
 
-    Solid line and shaded band: median (p50) to p95; error bars: the 95 % (study confidence)
-    interval of p95; dashed: p99; crosses: max. Zipped keys share one figure whose ticks show
-    every zipped value. Other swept keys become separate lines.
+
+def _combos(data: pd.DataFrame, keys: list[str], limit: int) -> tuple[list[tuple], bool]:
+    """Distinct value combinations of ``keys`` (evenly thinned to ``limit``; True if thinned)."""
+    combos = list(data[keys].drop_duplicates().itertuples(index=False, name=None)) if keys \
+        else [()]
+    if len(combos) <= limit:
+        return combos, False
+    return [combos[i] for i in np.linspace(0, len(combos) - 1, limit).round().astype(int)], True
+
+
+def _is_categorical(data: pd.DataFrame, key: str) -> bool:
+    return not pd.api.types.is_numeric_dtype(data[key])
+
+
+def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str, Figure]]:
+    """One figure per swept parameter: the metric's percentiles against it.
+
+    Columns of panels are solver variants; rows are the values of other categorical sweep keys
+    (e.g. common vs independent pixel error); other numeric sweep keys are lines. Each line is
+    the median (p50) with p95 above it (band for up to three lines, dashed otherwise) and the
+    confidence interval of p95 as error bars; with up to three lines also p99 (dotted) and max
+    (crosses). Zipped keys share one figure whose ticks show every zipped value.
     """
     study = result.study
     metric = plot_metric(study)
@@ -80,56 +101,76 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
     partners = _zip_partners(study)
     figures = []
     for key in study.sweep_keys:
-        group = partners[key]
-        categorical = len(group) == 1 and not pd.api.types.is_numeric_dtype(data[key])
-        if group[0] != key or categorical:
-            continue  # zipped keys share their group's figure; categories become lines
-        line_keys = [k for k in study.sweep_keys if k not in group]
-        combos = list(data[line_keys].drop_duplicates().itertuples(index=False)) \
-            if line_keys else [()]
-        combos = combos[:: max(1, int(np.ceil(len(combos) / MAX_LINES)))]
-        xs = data[list(group)].drop_duplicates().reset_index(drop=True)
-        numeric = len(group) == 1 and pd.api.types.is_numeric_dtype(xs[key])
-        fig = Figure(figsize=(5.2 * len(variants), 4.2), layout="constrained")
-        axes = fig.subplots(1, len(variants), squeeze=False, sharey=True)[0]
-        colors = [f"C{i}" for i in range(10)]
-        for ax, variant in zip(axes, variants, strict=True):
-            for combo, color in zip(combos, itertools.cycle(colors)):
-                sel = data[data["variant"] == variant]
-                for k, v in zip(line_keys, combo, strict=True):
-                    sel = sel[sel[k] == v]
-                sel = sel.merge(xs.reset_index(), on=list(group)).sort_values(
-                    key if numeric else "index")
+        group = list(partners[key])
+        if group[0] != key or (len(group) == 1 and _is_categorical(data, key)):
+            continue  # zipped keys share their group's figure; categories become panels
+        rest = [k for k in study.sweep_keys if k not in group]
+        row_keys = [k for k in rest if _is_categorical(data, k)]
+        line_keys = [k for k in rest if k not in row_keys]
+        rows, _ = _combos(data, row_keys, 4)
+        lines, thinned = _combos(data, line_keys, MAX_LINES)
+        few = len(lines) <= 3
+        xs = data[group].drop_duplicates().reset_index(drop=True)
+        numeric = len(group) == 1
+        fig = Figure(figsize=(5.0 * len(variants), 3.6 * len(rows) + 0.6), layout="constrained")
+        axes = fig.subplots(len(rows), len(variants), squeeze=False, sharex=True, sharey=True)
+        for (r, row), (c, variant) in itertools.product(enumerate(rows), enumerate(variants)):
+            ax = axes[r, c]
+            panel = _select(data[data["variant"] == variant], row_keys, row)
+            for i, line in enumerate(lines):
+                sel = _select(panel, line_keys, line).merge(xs.reset_index(), on=group)
+                sel = sel.sort_values(key if numeric else "index")
                 x = sel[key].to_numpy(float) if numeric else sel["index"].to_numpy()
-                label = ", ".join(short_label(k, v)
-                                  for k, v in zip(line_keys, combo, strict=True)) or None
+                color = f"C{i % 10}"
+                label = ", ".join(short_label(k, v) for k, v in zip(line_keys, line,
+                                                                     strict=True)) or None
                 ax.plot(x, sel["p50"], "-o", color=color, ms=3, label=label)
-                ax.fill_between(x, sel["p50"], sel["p95"], color=color, alpha=0.18, lw=0)
-                ax.errorbar(x, sel["p95"], yerr=[sel["p95"] - sel["p95_lo"].fillna(sel["p95"]),
-                                                 sel["p95_hi"].fillna(sel["p95"]) - sel["p95"]],
-                            fmt="none", ecolor=color, capsize=2, lw=0.8)
-                ax.plot(x, sel["p99"], "--", color=color, lw=0.9)
-                ax.plot(x, sel["max"], "x", color=color, ms=5)
-            if study.spec and (study.spec.variant in (None, variant)):
-                ax.axhline(study.spec.limit, color="k", lw=1, ls=":", label=_spec_text(study))
-            if numeric:
-                vals = xs[key].to_numpy(float)
-                if vals.min() > 0 and vals.max() / vals.min() >= 8:
-                    ax.set_xscale("log")
-                ax.set_xlabel(key_label(key))
-            else:
-                ax.set_xticks(xs.index, ["\n".join(_fmt(v) for v in row)
-                                         for row in xs.itertuples(index=False)], fontsize=7)
-                ax.set_xlabel("\n".join(key_label(k) for k in group), fontsize=8)
-            ax.set_title(f"{variant}", fontsize=10)
-            ax.grid(alpha=0.3)
-        axes[0].set_ylim(bottom=0)
-        axes[0].set_ylabel(f"{m.label} [{m.unit}]")
-        if axes[0].get_legend_handles_labels()[1]:
-            axes[0].legend(fontsize=7, loc="upper left")
+                if few:
+                    ax.fill_between(x, sel["p50"], sel["p95"], color=color, alpha=0.2, lw=0)
+                    ax.plot(x, sel["p99"], ":", color=color, lw=1)
+                    ax.plot(x, sel["max"], "x", color=color, ms=5)
+                else:
+                    ax.plot(x, sel["p95"], "--", color=color, lw=1)
+                err_lo = (sel["p95"] - sel["p95_lo"]).fillna(0.0)
+                err_hi = (sel["p95_hi"] - sel["p95"]).fillna(0.0)
+                ax.errorbar(x, sel["p95"], yerr=[err_lo, err_hi], fmt="none", ecolor=color,
+                            capsize=2, lw=0.8)
+            if study.spec and study.spec.variant in (None, variant):
+                ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
+            title = ", ".join(short_label(k, v) for k, v in zip(row_keys, row, strict=True))
+            ax.set_title(f"{variant}" + (f" — {title}" if title else ""), fontsize=9)
+            ax.grid(alpha=0.3, which="both")
+            if r == len(rows) - 1:
+                if numeric:
+                    ax.set_xlabel(key_label(key))
+                else:
+                    ax.set_xlabel("\n".join(key_label(k) for k in group), fontsize=8)
+            if c == 0:
+                ax.set_ylabel(f"{m.label} [{m.unit}]", fontsize=8)
+        ax0 = axes[0, 0]
+        if numeric:
+            vals = xs[key].to_numpy(float)
+            if vals.min() > 0 and vals.max() / vals.min() >= 8:
+                ax0.set_xscale("log")
+            ax0.set_xticks(vals, [_fmt(v) for v in vals], fontsize=7)
+            ax0.minorticks_off()
+        else:
+            ax0.set_xticks(xs.index, ["\n".join(_fmt(v) for v in row)
+                                      for row in xs.itertuples(index=False)], fontsize=7)
+        shown = data[data["variant"].isin(variants)]
+        lo, hi = np.nanmin(shown["p50"]), np.nanmax(shown["p99" if few else "p95"])
+        if lo > 0 and hi / lo > 30:
+            ax0.set_yscale("log")
+        else:
+            ax0.set_ylim(bottom=0)
+        if ax0.get_legend_handles_labels()[1]:
+            ax0.legend(fontsize=7, loc="best",
+                       title="thinned to 8 lines" if thinned else None, title_fontsize=7)
         ci = f"{study.header.confidence:.0%}"
-        fig.suptitle(f"{study.header.name}: line p50, band p50–p95 (bars: {ci} CI of p95), "
-                     "dashed p99, × max", fontsize=9)
+        style = ("line p50, band to p95, dotted p99, × max" if few
+                 else "solid p50, dashed p95")
+        fig.suptitle(f"{study.header.name}: {m.label} — {style}; bars: {ci} CI of p95",
+                     fontsize=9)
         figures.append((f"trend_{key.replace('.', '_')}.png", fig))
     return figures
 
@@ -147,20 +188,19 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
     sel = summary[(summary["metric"] == metric) & summary["point"].isin(points)]
     xmax = float(np.nanmax(sel["p99"])) * 1.5 or 1.0
     edges = np.linspace(0.0, xmax, 51)
-    mid = 0.5 * (agg.ABS_LOWER + np.minimum(agg.ABS_UPPER, 1e300)) * m.scale
     ncols = min(4, len(points))
     nrows = int(np.ceil(len(points) / ncols))
     fig = Figure(figsize=(3.3 * ncols, 2.5 * nrows + 0.5), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax, p in zip(axes, points, strict=False):
         for i, v in enumerate(variants):
-            stats = result.points[p].metrics.get((v, metric))
-            if stats is None or stats.count == 0:
+            hist = result.points[p].histograms.get((v, metric))
+            if hist is None or hist[2].sum() == 0:
                 continue
-            counts = agg.abs_histogram(stats.hist) if m.signed else stats.hist[agg.ZERO_BIN:]
-            centres = mid if m.signed else mid[: len(counts)]
+            lower, upper, counts = hist
+            centres = 0.5 * (lower + np.minimum(upper, 2 * lower)) * m.scale
             h, _ = np.histogram(np.minimum(centres, xmax * 0.999), bins=edges, weights=counts)
-            ax.stairs(h / stats.count, edges, color=f"C{i}", label=v, fill=i == 0,
+            ax.stairs(h / counts.sum(), edges, color=f"C{i}", label=v, fill=i == 0,
                       alpha=0.35 if i == 0 else 1.0)
         gp = study.points[p]
         ax.set_title(", ".join(short_label(k, v) for k, v in gp.overrides.items())
@@ -201,14 +241,17 @@ def lh_map_figure(result: StudyResult, summary: pd.DataFrame) -> Figure | None:
         for k, v in zip(others, combo, strict=True):
             sel = sel[sel[k] == v]
         grids.append(sel.pivot_table(index=H, columns=L, values=stat))
+    vmin = min(float(np.nanmin(g.to_numpy())) for g in grids)
     vmax = max(float(np.nanmax(g.to_numpy())) for g in grids)
+    norm = LogNorm(vmin, vmax) if vmin > 0 and vmax / vmin > 10 else Normalize(0, vmax)
     for ax, combo, grid in zip(axes, combos, grids, strict=True):
         z = grid.to_numpy()
         mesh = ax.pcolormesh(np.arange(z.shape[1] + 1), np.arange(z.shape[0] + 1), z,
-                             cmap="viridis", vmin=0, vmax=vmax)
+                             cmap="viridis", norm=norm)
         for (i, j), val in np.ndenumerate(z):
-            ax.text(j + 0.5, i + 0.5, f"{val:.2g}", ha="center", va="center", fontsize=6,
-                    color="w" if val < 0.6 * vmax else "k")
+            ax.text(j + 0.5, i + 0.5, f"{val:.0f}" if val >= 100 else f"{val:.3g}",
+                    ha="center", va="center", fontsize=7,
+                    color="w" if norm(val) < 0.6 else "k")
         if study.spec is not None and np.nanmin(z) < study.spec.limit < np.nanmax(z):
             cs = ax.contour(np.arange(z.shape[1]) + 0.5, np.arange(z.shape[0]) + 0.5, z,
                             levels=[study.spec.limit], colors="r", linewidths=2)

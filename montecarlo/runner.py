@@ -32,7 +32,8 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from montecarlo.aggregate import VALUE_COLUMNS, PointStats
+from montecarlo import __version__
+from montecarlo.aggregate import VALUE_COLUMNS, PointResult, PointStats
 from montecarlo.distributions import Streams
 from montecarlo.exceptions import InputError
 from montecarlo.study import Study
@@ -58,20 +59,24 @@ class StudyResult:
     """Statistics of every grid point of a study, and optional per-trial values."""
 
     study: Study
-    points: list[PointStats]
+    points: list[PointResult]
     trials: dict[int, pd.DataFrame] = field(default_factory=dict)
+
+    def _sweep_value(self, key: str, value: Any) -> Any:
+        """Sweep values as they go in a column: text if the key mixes numbers and text."""
+        kinds = {isinstance(p.overrides[key], str) for p in self.study.points}
+        return str(value) if len(kinds) > 1 else value
 
     def to_frame(self) -> pd.DataFrame:
         """Summary: one row per (grid point, variant, metric), values in display units."""
-        signed = {m.name: m.signed for _, m in self.study.metrics}
         frames = []
-        for gp, ps in zip(self.study.points, self.points, strict=True):
-            df = ps.summary(signed, self.study.header.confidence)
+        for gp, pr in zip(self.study.points, self.points, strict=True):
+            df = pr.summary.copy()
             scale = df["metric"].map({m.name: m.scale for _, m in self.study.metrics})
             df[VALUE_COLUMNS] = df[VALUE_COLUMNS].mul(scale, axis=0)
             df.insert(0, "point", gp.index)
             for i, key in enumerate(self.study.sweep_keys):
-                df.insert(1 + i, key, gp.overrides[key])
+                df.insert(1 + i, key, self._sweep_value(key, gp.overrides[key]))
             df.insert(len(self.study.sweep_keys) + 3, "unit",
                       df["metric"].map({m.name: m.unit for _, m in self.study.metrics}))
             frames.append(df)
@@ -146,23 +151,34 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
+CHECKPOINT_FORMAT = 1
+
+
 class Checkpoints:
-    """Finished grid points of one study, one pickle file each."""
+    """Finished grid points of one study, one pickle file each.
+
+    The directory name carries the study hash, the package version and the checkpoint format,
+    so a changed study or package never resumes from another's checkpoints.
+    """
 
     def __init__(self, root: Path, study: Study):
-        self.dir = root / f"{study.header.name}-{study.hash()[:16]}"
+        tag = f"{study.hash()[:16]}-v{__version__}-f{CHECKPOINT_FORMAT}"
+        self.dir = root / f"{study.header.name}-{tag}"
 
     def _file(self, point: int) -> Path:
         return self.dir / f"point-{point:06d}.pkl"
 
-    def load(self, point: int) -> tuple[PointStats, dict] | None:
+    def load(self, point: int) -> tuple[PointResult, dict] | None:
+        """The saved result of a point, or None if absent or unreadable."""
         try:
-            return pickle.loads(self._file(point).read_bytes())
-        except (FileNotFoundError, EOFError, pickle.UnpicklingError):
+            loaded = pickle.loads(self._file(point).read_bytes())
+        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError):
             return None
+        ok = isinstance(loaded, tuple) and len(loaded) == 2 and isinstance(loaded[0], PointResult)
+        return loaded if ok else None
 
-    def save(self, point: int, stats: PointStats, trials: dict) -> None:
-        atomic_write_bytes(self._file(point), pickle.dumps((stats, trials)))
+    def save(self, point: int, result: PointResult, trials: dict) -> None:
+        atomic_write_bytes(self._file(point), pickle.dumps((result, trials)))
 
     def remove(self) -> None:
         """Delete this study's checkpoints (and the checkpoint root if it is left empty)."""
@@ -214,17 +230,21 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     root = options.checkpoint_dir or Path("results") / ".checkpoints"
     checkpoints = Checkpoints(root, study)
     keep = study.header.per_trial
-    done: dict[int, tuple[PointStats, dict]] = {}
+    done: dict[int, tuple[PointResult, dict]] = {}
     for gp in study.points:
         loaded = checkpoints.load(gp.index)
         if loaded is not None:
             done[gp.index] = loaded
     todo = [gp.index for gp in study.points if gp.index not in done]
+    if done:
+        print(f"{study.header.name}: resuming, {len(done)} of {len(study.points)} grid points "
+              f"already computed ({checkpoints.dir})", file=sys.stderr)
     chunk_blocks = _chunk_blocks(study, todo, options) if todo else 1
     tasks = _tasks(study, todo, chunk_blocks)
     remaining = {p: _n_blocks(study, p) for p in todo}
     partial: dict[int, tuple[PointStats, dict]] = {p: (PointStats(), {}) for p in todo}
 
+    signed = {m.name: m.signed for _, m in study.metrics}
     total = sum(study.points[p].trials for p in todo)
     bar = tqdm(total=total, unit="trial", unit_scale=True, file=sys.stderr, dynamic_ncols=True,
                disable=not options.progress or not tasks,
@@ -241,8 +261,10 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
                     remaining[point] -= len(stats.blocks)
                     bar.update(sum(_block_trials(study, point, b) for b in stats.blocks))
                     if remaining[point] == 0:
-                        checkpoints.save(point, acc, trials)
-                        done[point] = partial.pop(point)
+                        del partial[point]
+                        finished = acc.finalize(signed, study.header.confidence)
+                        checkpoints.save(point, finished, trials)
+                        done[point] = (finished, trials)
                         if on_point is not None:
                             on_point(point)
     points = [done[gp.index][0] for gp in study.points]

@@ -20,7 +20,7 @@ from montecarlo.distributions import Distribution
 class Strict(BaseModel):
     """Base of every study-file model: unknown keys and wrong types are errors."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True)
 
 
 class FixedSource(Strict):

@@ -25,6 +25,7 @@ Every mistake raises :class:`InputError` with one line naming the file, the key 
 from __future__ import annotations
 
 import copy
+import difflib
 import hashlib
 import itertools
 import json
@@ -128,10 +129,18 @@ def _short(value: Any) -> str:
 
 def _validation_message(path: Path, err: ValidationError, prefix: tuple[str, ...],
                         where: str = "") -> str:
-    e = err.errors()[0]
+    """One line for the most telling error: an unknown key (a typo) before anything else."""
+    errors = sorted(err.errors(), key=lambda e: e["type"] != "extra_forbidden")
+    e = errors[0]
     loc = ".".join(str(x) for x in (*prefix, *e["loc"]))
     messages = {"extra_forbidden": "unknown key", "missing": "required key is missing"}
     msg = messages.get(e["type"], e["msg"])
+    if e["type"] == "extra_forbidden":
+        missing = [str(m["loc"][-1]) for m in errors
+                   if m["type"] == "missing" and m["loc"][:-1] == e["loc"][:-1]]
+        close = difflib.get_close_matches(str(e["loc"][-1]), missing, n=1)
+        if close:
+            msg += f" (did you mean '{close[0]}'?)"
     value = "" if e["type"] == "missing" else f" (got {_short(e.get('input'))})"
     return f"{path}: {loc}: {msg}{value}{where}"
 

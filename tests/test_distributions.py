@@ -1,0 +1,69 @@
+"""Error sources, random streams, corners and the pixel relation between targets."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from montecarlo.distributions import Distribution, Streams, corner_signs, correlated_pair
+
+N = 200_000
+
+
+def test_streams_are_common_across_points_only_when_asked():
+    a = Streams(1, point=0, block=3).uniform("dx_m", 100)
+    b = Streams(1, point=7, block=3).uniform("dx_m", 100)
+    assert np.array_equal(a, b)
+    c = Streams(1, point=7, block=3, common=False).uniform("dx_m", 100)
+    d = Streams(1, point=0, block=3, common=False).uniform("dx_m", 100)
+    assert not np.array_equal(c, d)
+    assert not np.array_equal(a, Streams(1, point=0, block=4).uniform("dx_m", 100))
+    assert not np.array_equal(a, Streams(1, point=0, block=3).uniform("dy_m", 100))
+
+
+def test_streams_match_seedsequence_spawn():
+    """Spawn keys equal nested SeedSequence.spawn: key (block, source) = child of child."""
+    from montecarlo.distributions import source_key
+
+    root = np.random.SeedSequence(42)
+    child = root.spawn(6)[5]
+    ref = np.random.Generator(np.random.PCG64(np.random.SeedSequence(
+        42, spawn_key=(5, source_key("x")))))
+    assert child.spawn_key == (5,)
+    assert np.array_equal(Streams(42, 0, 5).generator("x").random(5), ref.random(5))
+
+
+def test_corner_signs_enumerate_every_corner_once():
+    s = corner_signs(0, 64, 6)
+    assert s.shape == (6, 64)
+    assert len({tuple(c) for c in s.T}) == 64
+    np.testing.assert_array_equal(corner_signs(64, 64, 6), s)  # periodic in the trial index
+
+
+@pytest.mark.parametrize("rho", [-0.6, 0.3, 0.9])
+@pytest.mark.parametrize("kind", ["uniform", "normal"])
+def test_correlated_pair_has_the_requested_correlation_and_marginals(kind, rho):
+    """Pearson correlation rho within 4 standard errors ((1 - rho^2)/sqrt(N) for large N)."""
+    dist = Distribution(kind, 0.0, 1.0)
+    za, zb = correlated_pair(dist, rho, Streams(5, 0, 0), "pixel_x", N)
+    r = np.corrcoef(za, zb)[0, 1]
+    assert abs(r - rho) < 4 * (1 - rho**2) / np.sqrt(N) + 1e-3
+    ref = stats.uniform(-1, 2) if kind == "uniform" else stats.norm()
+    for z in (za, zb):
+        assert stats.kstest(z, ref.cdf).pvalue > 1e-3
+
+
+def test_relation_limits_and_common_a_draws():
+    dist = Distribution("uniform", 0.0, 1.0)
+    s = Streams(5, 0, 0)
+    a1, b1 = correlated_pair(dist, "common", s, "p", 1000)
+    a0, b0 = correlated_pair(dist, "independent", s, "p", 1000)
+    a5, _ = correlated_pair(dist, 0.5, s, "p", 1000)
+    assert np.array_equal(a1, b1)
+    assert np.array_equal(a1, a0) and np.array_equal(a1, a5)  # A's draws never change
+    assert not np.array_equal(a0, b0)
+
+
+def test_worst_case_of_a_normal_source_is_refused():
+    with pytest.raises(ValueError, match="no worst case"):
+        Distribution("normal", 0.0, 1.0).worst_case()
+    assert Distribution("uniform", 1.0, 2.0).worst_case() == Distribution("corners", 1.0, 2.0)

@@ -1,0 +1,110 @@
+"""Study outputs: files, provenance, report and plots; all or nothing."""
+
+import json
+import textwrap
+
+import pandas as pd
+import pytest
+
+from montecarlo import outputs
+from montecarlo.cli import main
+
+STUDY = """
+[study]
+name = "out"
+description = "output test"
+system = "ground"
+trials = 2000
+seed = 3
+block_size = 1000
+per_trial = true
+
+[sensor]
+fov_deg = [90.0, 90.0]
+pixels = [512, 512]
+
+[geometry]
+L_m = 100.0
+H_m = 2.0
+
+[errors]
+dx_m = { dist = "uniform", bound = 0.1 }
+pixel_px = { dist = "normal", sigma = 0.5 }
+pixel_relation = "independent"
+
+[spec]
+metric = "rotation_angle"
+variant = "normalised"
+limit = 3.0
+
+[[sweep]]
+"geometry.L_m" = [50.0, 100.0]
+"geometry.H_m" = [1.0, 2.0, 4.0]
+"""
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("outputs")
+    p = tmp / "out.toml"
+    p.write_text(textwrap.dedent(STUDY))
+    out = tmp / "results" / "out"
+    assert main(["run", str(p), "--quiet", "--out", str(out)]) == 0
+    return p, out
+
+
+def test_files_written(run_dir):
+    _, out = run_dir
+    names = {p.name for p in out.iterdir()}
+    assert {"summary.csv", "summary.parquet", "trials.parquet", "provenance.json",
+            "report.md", "plots"} <= names
+    plots = {p.name for p in (out / "plots").iterdir()}
+    assert {"histograms.png", "map_L_H.png", "trend_geometry_L_m.png",
+            "trend_geometry_H_m.png"} <= plots
+    trials = pd.read_parquet(out / "trials.parquet")
+    assert len(trials) == 6 * 2000 and "normalised/rotation_angle" in trials
+
+
+def test_summary_columns_and_units(run_dir):
+    _, out = run_dir
+    df = pd.read_csv(out / "summary.csv")
+    assert set(df["unit"]) == {"mrad"}
+    for col in ("count", "invalid", "mean", "std", "p50", "p90", "p95", "p99", "max",
+                "p95_lo", "p95_hi", "percentiles_of", "geometry.L_m", "geometry.H_m"):
+        assert col in df.columns
+    assert set(df["metric"]) == {"rotation_angle", "eq18_angle", "table1_angle",
+                                 "delta_psi", "delta_theta", "delta_gamma"}
+    assert (df.loc[df["metric"].str.startswith("delta"), "percentiles_of"] == "abs").all()
+
+
+def test_provenance(run_dir):
+    _, out = run_dir
+    prov = json.loads((out / "provenance.json").read_text())
+    for key in ("study_hash", "seed", "package_version", "git_commit", "libraries",
+                "resolved_study", "run_options"):
+        assert key in prov
+    assert prov["seed"] == 3 and len(prov["study_hash"]) == 64
+    assert prov["libraries"]["numpy"]
+    assert len(prov["resolved_study"]["points"]) == 6
+
+
+def test_report_states_assumptions_and_spec(run_dir):
+    _, out = run_dir
+    report = (out / "report.md").read_text()
+    assert "independent between targets" in report
+    assert "## Spec" in report and ("meets" in report or "fails" in report)
+    assert "plots/map_L_H.png" in report
+
+
+def test_failure_leaves_previous_results_untouched(run_dir, monkeypatch):
+    p, out = run_dir
+    before = (out / "summary.csv").read_bytes()
+
+    def broken(*_):
+        raise RuntimeError("plotting failed")
+
+    monkeypatch.setattr(outputs, "all_figures", broken)
+    with pytest.raises(RuntimeError):
+        main(["run", str(p), "--quiet", "--out", str(out), "--seed", "4"])
+    assert (out / "summary.csv").read_bytes() == before
+    assert not [q for q in out.parent.iterdir() if q.name.startswith(".out.")]

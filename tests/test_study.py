@@ -1,0 +1,136 @@
+"""Study files: shipped studies load, sweeps expand, and every mistake is one line, exit 2."""
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from montecarlo.cli import main
+from montecarlo.study import load_study
+
+STUDIES = sorted(Path(__file__).parent.parent.glob("studies/*.toml"))
+
+BASE = """
+[study]
+name = "t"
+system = "ground"
+trials = 100
+seed = 1
+
+[sensor]
+fov_deg = [90.0, 90.0]
+pixels = [512, 512]
+
+[geometry]
+L_m = 50.0
+H_m = 1.0
+
+[errors]
+pixel_px = { dist = "normal", sigma = 0.5 }
+pixel_relation = "common"
+"""
+
+
+def write(tmp_path, text, name="study.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+@pytest.mark.parametrize("path", STUDIES, ids=[p.name for p in STUDIES])
+def test_shipped_studies_validate(path):
+    study = load_study(path)
+    assert study.points and study.metrics
+
+
+def test_table1_study_has_the_papers_six_rows_twice():
+    study = load_study(Path(__file__).parent.parent / "studies/table1.toml")
+    assert len(study.points) == 12
+    assert [p.trials for p in study.points[::2]] == [64] * 6  # the 2^6 corners
+
+
+def test_zip_and_product_expand(tmp_path):
+    p = write(tmp_path, BASE + """
+    [[sweep]]
+    mode = "zip"
+    "geometry.L_m" = [50.0, 100.0, 200.0]
+    "geometry.H_m" = [1.0, 2.0, 3.0]
+
+    [[sweep]]
+    "errors.pixel_relation" = ["common", "independent"]
+    "errors.pixel_px.sigma" = [0.1, 0.2]
+    """)
+    study = load_study(p)
+    assert len(study.points) == 3 * 2 * 2
+    assert study.points[-1].overrides == {"geometry.L_m": 200.0, "geometry.H_m": 3.0,
+                                          "errors.pixel_relation": "independent",
+                                          "errors.pixel_px.sigma": 0.2}
+    assert study.hash() == load_study(p).hash()
+    assert study.hash() != load_study(p, seed=2).hash()
+
+
+MISTAKES = [
+    ("unknown key", BASE.replace("L_m = 50.0", "L_mm = 50.0"), ["geometry.L_mm", "unknown key"]),
+    ("wrong type", BASE.replace("L_m = 50.0", 'L_m = "fifty"'), ["geometry.L_m", "'fifty'"]),
+    ("out of range", BASE.replace("L_m = 50.0", "L_m = -5.0"), ["geometry.L_m", "-5.0"]),
+    ("zero height", BASE.replace("H_m = 1.0", "H_m = 0.0"), ["geometry.H_m", "0.0"]),
+    ("empty sweep", BASE + '[[sweep]]\n"geometry.L_m" = []\n', ["geometry.L_m", "empty list"]),
+    ("zip lengths", BASE + '[[sweep]]\nmode = "zip"\n"geometry.L_m" = [1.0, 2.0]\n'
+     '"geometry.H_m" = [1.0]\n', ["zipped lists differ", "geometry.H_m: 1"]),
+    ("unknown system", BASE.replace('system = "ground"', 'system = "orbital"'),
+     ["study.system", "'orbital'"]),
+    ("TOML syntax", BASE.replace("trials = 100", "trials = = 100"), ["not valid TOML", "line"]),
+    ("unknown dist", BASE.replace('dist = "normal"', 'dist = "gaussian"'),
+     ["errors.pixel_px", "gaussian"]),
+    ("missing section", BASE.replace("[geometry]\nL_m = 50.0\nH_m = 1.0\n", ""),
+     ["geometry", "required key is missing"]),
+    ("missing relation", BASE.replace('pixel_relation = "common"\n', ""),
+     ["errors.pixel_relation", "required"]),
+    ("correlation range", BASE.replace('pixel_relation = "common"', "pixel_relation = 1.5"),
+     ["errors.pixel_relation", "1.5"]),
+    ("normal worst case", BASE.replace("[errors]", '[errors]\nevaluation = "worst_case"'),
+     ["errors", "pixel_px", "no worst case"]),
+    ("field of view", BASE.replace("fov_deg = [90.0, 90.0]", "fov_deg = [190.0, 90.0]"),
+     ["sensor.fov_deg", "190.0"]),
+    ("bad sweep value", BASE + '[[sweep]]\n"geometry.H_m" = [1.0, 0.0]\n',
+     ["geometry.H_m", "sweep point 1", "0.0"]),
+    ("sweep into a number", BASE + '[[sweep]]\n"geometry.L_m.x" = [1.0]\n',
+     ["geometry.L_m.x", "not a table"]),
+    ("unknown spec metric", BASE + '[spec]\nmetric = "nope"\nlimit = 3.0\n',
+     ["spec.metric", "nope"]),
+    ("negative trials", BASE.replace("trials = 100", "trials = -3"), ["study.trials", "-3"]),
+]
+
+
+@pytest.mark.parametrize(("kind", "text", "needles"), MISTAKES, ids=[m[0] for m in MISTAKES])
+def test_mistakes_give_one_line_and_exit_2(tmp_path, capsys, kind, text, needles):
+    p = write(tmp_path, text)
+    code = main(["run", str(p), "--quiet", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert str(p) in err, err
+    for needle in needles:
+        assert needle in err, (needle, err)
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_file_and_bad_flags(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.toml")]) == 2
+    assert "no such study file" in capsys.readouterr().err
+    p = write(tmp_path, BASE)
+    for flags in (["--n-jobs", "0"], ["--trials", "ten"], ["--backend", "mpi"],
+                  ["--scheduler", "tcp://x:1"]):
+        assert main(["run", str(p), "--quiet", *flags]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+
+
+def test_real_process_exit_code(tmp_path):
+    p = write(tmp_path, BASE.replace("L_m = 50.0", "L_m = -5.0"))
+    out = subprocess.run([sys.executable, "-m", "montecarlo.cli", "run", str(p)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0 and "geometry.L_m" in out.stderr
