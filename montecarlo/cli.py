@@ -35,6 +35,81 @@ def _cmd_table1(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
+    return value
+
+
+def _cmd_air(args: argparse.Namespace) -> int:
+    from montecarlo import air
+
+    table = air.reproduce_paper(n=args.trials, rng=args.seed)
+    if args.json:
+        out = {
+            "paper_mrad": {"one_sigma": air.PAPER_1SIGMA / air.MRAD,
+                           "three_sigma": air.PAPER_3SIGMA / air.MRAD},
+            "rss_of_inputs_mrad": air.rss_of_inputs() / air.MRAD,
+            "one_d_from_1sigma_inputs_mrad": {
+                k: v / air.MRAD for k, v in air.one_sigma_rotation(1).items()},
+            "consistent_readings": air.consistent_readings(table).to_dict(orient="records"),
+            "seed": args.seed,
+            "rows": table.to_dict(orient="records"),
+        }
+        print(json.dumps(out, indent=2))
+    else:
+        print(air.format_reproduction(table))
+    return 0
+
+
+def _add_air_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("air", help="seed 000, section 2: reproduce 1.70 / 5.10 mrad of the air "
+                       "dynamic calibration with every rotation metric")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.add_argument("--trials", type=_positive_int, default=200_000,
+                   help="Monte Carlo trials per reading (default 200000)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(func=_cmd_air)
+
+
+def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
+    from montecarlo import transfer_alignment as ta
+
+    try:
+        cfg = ta.AlignmentConfig(manoeuvre=args.manoeuvre, duration=args.duration,
+                                 attitude_matching=args.attitude_matching)
+    except ValueError as exc:
+        raise InputError(f"montecarlo transfer-alignment: --duration {args.duration}: {exc}"
+                         ) from None
+    table = ta.table2_grid(cfg, rng=args.seed, runs=args.runs)
+    if args.json:
+        print(json.dumps({"config": ta.describe(cfg), "seed": args.seed,
+                          "rows": table.to_dict(orient="records")}, indent=2))
+    else:
+        print(ta.format_table2(table, cfg))
+    return 0
+
+
+def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
+    from montecarlo.transfer_alignment import MANOEUVRES
+
+    p = sub.add_parser("transfer-alignment", help="seed 000, Table 2: Kalman-filter transfer "
+                       "alignment for the five IMU grades, paper vs ours")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.add_argument("--runs", type=_positive_int, default=100,
+                   help="Monte Carlo runs per IMU grade (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--manoeuvre", choices=MANOEUVRES, default="s_turn")
+    p.add_argument("--duration", type=float, default=120.0, help="alignment time [s]")
+    p.add_argument("--attitude-matching", action="store_true",
+                   help="add attitude matching to velocity matching")
+    p.set_defaults(func=_cmd_transfer_alignment)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="montecarlo",
@@ -47,6 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("table1", help="reproduce seed 000, Table 1 and compare with the paper")
     p.add_argument("--json", action="store_true", help="print a JSON list of six rows")
     p.set_defaults(func=_cmd_table1)
+    _add_air_commands(sub)
+    _add_transfer_alignment_commands(sub)
     return parser
 
 
