@@ -168,7 +168,8 @@ class AlignmentConfig:
         if self.manoeuvre not in MANOEUVRES:
             raise ValueError(f"manoeuvre {self.manoeuvre!r} not in {MANOEUVRES}")
         if self.kf_interval < 1 or self.dt <= 0 or self.duration < self.dt * self.kf_interval:
-            raise ValueError("need dt > 0, kf_interval >= 1 and at least one Kalman update")
+            raise ValueError(f"duration {self.duration!r} s: need dt > 0, kf_interval >= 1 "
+                             "and at least one Kalman update")
 
     @property
     def n_states(self) -> int:
