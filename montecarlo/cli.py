@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 
@@ -81,6 +82,7 @@ def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
 
     try:
         cfg = ta.AlignmentConfig(manoeuvre=args.manoeuvre, duration=args.duration,
+                                 bank=math.radians(args.bank), period=args.period,
                                  attitude_matching=args.attitude_matching)
     except ValueError as exc:
         raise InputError(f"montecarlo transfer-alignment: {exc}") from None
@@ -102,7 +104,13 @@ def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--manoeuvre", default="s_turn",
                    help="flight profile: s_turn (default), wing_rock or level")
-    p.add_argument("--duration", type=float, default=120.0, help="alignment time [s]")
+    p.add_argument("--duration", type=float, default=120.0,
+                   help="alignment time [s] (default 120)")
+    p.add_argument("--bank", type=float, default=30.0,
+                   help="peak bank of the S-turn, roll amplitude of the wing rock [deg] "
+                   "(default 30)")
+    p.add_argument("--period", type=float, default=60.0,
+                   help="period of the S-turn or the wing rock [s] (default 60)")
     p.add_argument("--attitude-matching", action="store_true",
                    help="add attitude matching to velocity matching")
     p.set_defaults(func=_cmd_transfer_alignment)

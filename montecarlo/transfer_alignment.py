@@ -167,6 +167,9 @@ class AlignmentConfig:
     def __post_init__(self) -> None:
         if self.manoeuvre not in MANOEUVRES:
             raise ValueError(f"manoeuvre {self.manoeuvre!r} not in {MANOEUVRES}")
+        if not (self.period > 0 and self.speed > 0 and abs(self.bank) < np.pi / 2):
+            raise ValueError(f"need period > 0 (got {self.period!r} s), speed > 0 (got "
+                             f"{self.speed!r} m/s) and |bank| < 90° (got {self.bank!r} rad)")
         if self.kf_interval < 1 or self.dt <= 0 or self.duration < self.dt * self.kf_interval:
             raise ValueError(f"duration {self.duration!r} s: need dt > 0, kf_interval >= 1 "
                              "and at least one Kalman update")
