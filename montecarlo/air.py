@@ -228,6 +228,10 @@ def transfer_alignment_covariance(params: Mapping[str, float | int | str]) -> Fl
     raise InputError(f"ta_source: {source!r} is not one of {TA_SOURCES}")
 
 
+_NON_NEGATIVE = ("heading_sigma", "level_sigma", "gyro_drift", "accel_bias", "install_bound",
+                 "master_heading_sigma", "master_level_sigma")
+
+
 def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
                ) -> dict[str, FloatArray]:
     """Monte Carlo trials of the air dynamic calibration (hook for the study runner).
@@ -277,10 +281,16 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
     if unknown:
         raise InputError(f"unknown air calibration parameter(s): {', '.join(sorted(unknown))}")
     p = {**DEFAULT_PARAMS, **params}
+    for key in _NON_NEGATIVE:
+        if not float(p[key]) >= 0.0:
+            raise InputError(f"{key}: {p[key]!r} must be a number >= 0")
     split = str(p["level_split"])
     P_ta = transfer_alignment_covariance(p)
-    w, V = np.linalg.eigh(P_ta)
-    phi_ta = rng.standard_normal((n, 3)) @ (V * np.sqrt(np.clip(w, 0.0, None))).T
+    if np.count_nonzero(P_ta - np.diag(np.diagonal(P_ta))):
+        factor = np.linalg.cholesky(P_ta)  # the filter's full covariance
+    else:
+        factor = np.diag(np.sqrt(np.diagonal(P_ta)))
+    phi_ta = rng.standard_normal((n, 3)) @ factor.T
     bound = float(p["install_bound"])
     install = rng.uniform(-bound, bound, size=(n, 3))
     P_m = level_heading_covariance(float(p["master_heading_sigma"]),

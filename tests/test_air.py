@@ -189,6 +189,8 @@ def test_kalman_source_draws_from_the_filter_covariance():
     ({"ta_source": "guess"}, "ta_source"),
     ({"ta_source": "table2", "gyro_drift": 1e-6}, "not a Table 2 grade"),
     ({"level_split": "half"}, "level_split"),
+    ({"install_bound": -1e-4}, "install_bound"),
+    ({"heading_sigma": float("nan")}, "heading_sigma"),
 ])
 def test_bad_params_raise_input_error(params, match):
     with pytest.raises(InputError, match=match):

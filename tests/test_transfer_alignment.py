@@ -194,3 +194,15 @@ def test_bad_config_rejected():
         ta.AlignmentConfig(manoeuvre="barrel_roll")
     with pytest.raises(ValueError, match="Kalman"):
         ta.AlignmentConfig(duration=0.01)
+
+
+def test_default_table2_grid_regression():
+    """Stored values (docs/air.md, Table 2 comparison): filter 1σ heading and level RSS [′],
+    default configuration, to the two decimals printed there."""
+    heading, level = [], []
+    for row in ta.TABLE2_ROWS:
+        P = ta.final_attitude_covariance(ta.grade_config(row.gyro_drift, row.accel_bias))
+        heading.append(round(np.sqrt(P[2, 2]) / ta.ARCMIN, 2))
+        level.append(round(np.sqrt(P[0, 0] + P[1, 1]) / ta.ARCMIN, 2))
+    assert heading == [0.20, 0.20, 0.20, 0.31, 0.34]
+    assert level == [0.57, 0.37, 0.23, 0.25, 0.25]
