@@ -1,0 +1,53 @@
+"""`montecarlo air` and `montecarlo transfer-alignment`, run as subprocesses."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "montecarlo.cli", *args], capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_air_json_reproduces_the_paper_within_2_percent():
+    out = run_cli("air", "--json", "--trials", "20000", "--seed", "1")
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout)
+    assert res["paper_mrad"] == {"one_sigma": 1.70, "three_sigma": 5.10}
+    best = [r for r in res["consistent_readings"]
+            if r["scenario"] == "rss" and r["metric"] == "rotation_angle"]
+    assert len(best) == 1
+    assert abs(best[0]["one_sigma_mrad"] / 1.70 - 1) < 0.02
+    assert abs(best[0]["three_sigma_mrad"] / 5.10 - 1) < 0.02
+    metrics = {r["metric"] for r in res["rows"]}
+    assert {"rotation_angle", "eq18_angle", "table1_angle", "delta_psi"} <= metrics
+
+
+def test_air_text_names_every_metric():
+    out = run_cli("air", "--trials", "2000")
+    assert out.returncode == 0, out.stderr
+    for name in ("rotation_angle", "eq18_angle", "table1_angle", "1.70", "5.10"):
+        assert name in out.stdout
+
+
+def test_transfer_alignment_json_has_the_five_grades():
+    out = run_cli("transfer-alignment", "--json", "--runs", "5", "--duration", "20")
+    assert out.returncode == 0, out.stderr
+    rows = json.loads(out.stdout)["rows"]
+    assert [(r["gyro_deg_h"], r["accel_g"]) for r in rows] == [
+        (0.05, 5e-4), (0.05, 1e-4), (0.05, 5e-5), (0.5, 5e-5), (1.0, 5e-5)]
+    assert [r["paper_level_arcmin"] for r in rows] == [20, 12, 5, 5, 5]
+    assert all(r["level_cov_arcmin"] > 0 for r in rows)
+
+
+@pytest.mark.parametrize("args", [["air", "--trials", "0"], ["air", "--bogus"],
+                                  ["transfer-alignment", "--duration", "0.01"],
+                                  ["transfer-alignment", "--manoeuvre", "loop"]])
+def test_bad_flags_exit_2_with_one_line(args):
+    out = run_cli(*args)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1, out.stderr
+    assert "Traceback" not in out.stderr
