@@ -655,23 +655,28 @@ def plot_pair_figures(outdir: str | Path) -> list[Path]:
     outdir.mkdir(parents=True, exist_ok=True)
     written = []
     for name, (kind, offset, title) in FIGURES.items():
-        top = 180.0 if kind == "horizontal" else 85.0
-        deg = np.linspace(0.0, top, 361)
+        top = 180.0 if kind == "horizontal" else 80.0
+        deg = np.linspace(0.0, top, 321)
         fig = Figure(figsize=(9, 3.8), layout="constrained")
         axes = fig.subplots(1, 2)
+        largest = [0.0, 0.0]
         for k, value in enumerate(FIGURE_OFFSETS_DEG):
             color = f"C{k}"
             for view, style in (("body", "-"), ("readings", ":")):
-                da, db = pair_deviation(kind, np.radians(deg), view=view,
-                                        **{offset: math.radians(value)})
+                dev = pair_deviation(kind, np.radians(deg), view=view,
+                                     **{offset: math.radians(value)})
                 label = f"{value}° ({'INS frame' if view == 'body' else 'readings'})"
-                axes[0].plot(deg, da / ARCSEC, style, color=color, label=label)
-                axes[1].plot(deg, db / ARCSEC, style, color=color, label=label)
+                for j in (0, 1):
+                    axes[j].plot(deg, dev[j] / ARCSEC, style, color=color, label=label)
+                    largest[j] = max(largest[j], float(np.max(np.abs(dev[j]))) / ARCSEC)
         symbol = "α" if kind == "horizontal" else "β"
-        for ax, what in zip(axes, ("Δα (azimuth)", "Δβ (pitch)"), strict=True):
-            ax.set_xlabel(f"mirror angle {symbol} [deg]")
-            ax.set_ylabel(f"{what} [arc-seconds]")
-            ax.grid(alpha=0.3)
+        for j, what in enumerate(("Δα (azimuth)", "Δβ (pitch)")):
+            axes[j].set_xlabel(f"mirror angle {symbol} [deg]")
+            axes[j].set_ylabel(f"{what} [arc-seconds]")
+            axes[j].grid(alpha=0.3)
+            if largest[j] < 1e-6:
+                axes[j].set_ylim(-1.0, 1.0)
+                axes[j].set_title(f"zero (largest {largest[j]:.0e}″)", fontsize=9)
         axes[0].legend(fontsize=7)
         fig.suptitle(f"seed 003, {title}")
         path = outdir / f"{name}.png"

@@ -236,13 +236,6 @@ def test_paper_statements_verdicts():
     assert sum(not r["holds"] for r in rows) == 2
 
 
-def test_plot_pair_figures_writes_pngs(tmp_path):
-    paths = col.plot_pair_figures(tmp_path)
-    assert [p.name for p in paths] == ["fig3.png", "fig4.png", "fig5.png", "fig6.png"]
-    for p in paths:
-        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
 # ----------------------------------------------------------------- CSV
 
 
