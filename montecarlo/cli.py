@@ -165,6 +165,119 @@ def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_transfer_alignment)
 
 
+def _positive(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number >= 0")
+    return value
+
+
+def _write_text_atomic(path: str, text: str) -> None:
+    from pathlib import Path
+
+    from montecarlo.runner import atomic_write_bytes
+
+    atomic_write_bytes(Path(path), text.encode())
+
+
+def _cmd_collimation_fit(args: argparse.Namespace) -> int:
+    from montecarlo import collimation as col
+
+    effects = col.BASE_EFFECTS + (("frame_misalignment",) if args.fit_frame_tilt else ())
+    readings = col.read_readings(args.data, effects)
+    sigma = None if args.angle_sigma_arcsec is None else args.angle_sigma_arcsec * col.ARCSEC
+    try:
+        result = col.fit(readings.theodolite_az, readings.theodolite_el, readings.ins_az,
+                         readings.ins_el, readings.ins_roll, sigma=sigma, effects=effects)
+    except col.NotSeparable as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    report = col.fit_report(readings, result, str(args.data))
+    if args.json:
+        _write_text_atomic(args.json, json.dumps(report, indent=2) + "\n")
+    print(col.format_report(report))
+    return 0
+
+
+def _cmd_collimation_simulate(args: argparse.Namespace) -> int:
+    import math
+
+    from montecarlo import collimation as col
+
+    az, el, sets = col.paper_layout(args.n_azimuth, args.n_pitch,
+                                    math.radians(args.azimuth_span_deg),
+                                    math.radians(args.pitch_span_deg))
+    truth = {"axis_az": args.axis_az_arcsec * col.ARCSEC,
+             "axis_el": args.axis_el_arcsec * col.ARCSEC,
+             "frame_heading": math.radians(args.frame_heading_deg)}
+    ins = args.ins_sigma_arcsec * col.ARCSEC
+    noise = col.Noise(theodolite=args.theodolite_sigma_arcsec * col.ARCSEC, ins_heading=ins,
+                      ins_pitch=ins, ins_roll=ins,
+                      mount_roll=math.radians(args.mount_roll_sigma_deg))
+    data = col.simulate_readings(truth, az, el, noise, args.seed)
+    names = ([f"A{i + 1}" for i in range(args.n_azimuth)]
+             + [f"P{i + 1}" for i in range(args.n_pitch)])
+    col.write_readings(args.out, names, sets.tolist(), data, with_roll=args.with_roll)
+    print(f"wrote {args.out}: {len(names)} mirrors, seed {args.seed}, axis_az "
+          f"{args.axis_az_arcsec}″, axis_el {args.axis_el_arcsec}″, frame_heading "
+          f"{args.frame_heading_deg}°")
+    return 0
+
+
+def _cmd_collimation_figures(args: argparse.Namespace) -> int:
+    from montecarlo import collimation as col
+
+    for path in col.plot_pair_figures(args.outdir):
+        print(f"wrote {path}")
+    print("seed 003, section 2 statements, evaluated with offsets of 0.1° (level mount):")
+    for row in col.paper_statements():
+        verdict = "holds" if row["holds"] else "DOES NOT HOLD"
+        print(f"  {row['statement']}: {row['quantity']} = {row['model']:.4g} -> {verdict}")
+    return 0
+
+
+def _add_collimation_commands(sub: argparse._SubParsersAction) -> None:
+    col = sub.add_parser("collimation", help="autocollimator-INS axis calibration (seed 003)")
+    csub = col.add_subparsers(dest="collimation_command", required=True, parser_class=_Parser)
+
+    p = csub.add_parser("fit", help="fit the optical-axis offsets to a calibration CSV")
+    p.add_argument("data", help="CSV: mirror, set, theodolite_az_deg, theodolite_el_deg, "
+                   "ins_az_deg, ins_el_deg[, ins_roll_deg]")
+    p.add_argument("--json", metavar="OUT.json", help="also write the results as JSON")
+    p.add_argument("--angle-sigma-arcsec", type=_positive, metavar="S",
+                   help="known sigma of each heading/pitch residual (default: from residuals)")
+    p.add_argument("--fit-frame-tilt", action="store_true",
+                   help="also fit the tilt of the theodolite frame against the INS level")
+    p.set_defaults(func=_cmd_collimation_fit)
+
+    p = csub.add_parser("simulate", help="write a simulated calibration CSV")
+    p.add_argument("out", help="CSV file to write")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--axis-az-arcsec", type=float, default=180.0)
+    p.add_argument("--axis-el-arcsec", type=float, default=180.0)
+    p.add_argument("--frame-heading-deg", type=float, default=30.0)
+    p.add_argument("--n-azimuth", type=int, default=5)
+    p.add_argument("--n-pitch", type=int, default=5)
+    p.add_argument("--azimuth-span-deg", type=float, default=90.0)
+    p.add_argument("--pitch-span-deg", type=float, default=60.0)
+    p.add_argument("--theodolite-sigma-arcsec", type=_non_negative, default=2.0)
+    p.add_argument("--ins-sigma-arcsec", type=_non_negative, default=2.0)
+    p.add_argument("--mount-roll-sigma-deg", type=_non_negative, default=0.0,
+                   help="spread of the true INS roll (0: level mount)")
+    p.add_argument("--with-roll", action="store_true", help="write the ins_roll_deg column")
+    p.set_defaults(func=_cmd_collimation_simulate)
+
+    p = csub.add_parser("figures", help="plot seed 003 Figs. 3-6 and check the text's statements")
+    p.add_argument("outdir", help="directory for fig3.png ... fig6.png")
+    p.set_defaults(func=_cmd_collimation_figures)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="montecarlo",
@@ -200,6 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_nightly)
     _add_air_commands(sub)
     _add_transfer_alignment_commands(sub)
+    _add_collimation_commands(sub)
     return parser
 
 

@@ -1,0 +1,99 @@
+"""``montecarlo collimation ...`` run as a subprocess, as users run it."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from montecarlo.cli import main
+
+GOOD = """mirror,set,theodolite_az_deg,theodolite_el_deg,ins_az_deg,ins_el_deg
+A1,azimuth,0.0,0.0,30.0,-0.05
+A2,azimuth,45.0,0.0,75.0,-0.05
+P1,pitch,0.0,30.0,29.99,29.95
+P2,pitch,0.0,60.0,29.95,59.95
+"""
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "montecarlo.cli", "collimation", *args],
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_simulate_then_fit_recovers_the_injected_offsets(tmp_path):
+    data, out = tmp_path / "cal.csv", tmp_path / "fit.json"
+    sim = run_cli("simulate", str(data), "--seed", "7", "--axis-az-arcsec", "300",
+                  "--axis-el-arcsec", "-120", "--with-roll", "--mount-roll-sigma-deg", "0.5")
+    assert sim.returncode == 0, sim.stderr
+    fit = run_cli("fit", str(data), "--json", str(out), "--angle-sigma-arcsec", "2.83")
+    assert fit.returncode == 0, fit.stderr
+    assert "axis_az" in fit.stdout and "RMS of all residuals" in fit.stdout
+    report = json.loads(out.read_text())
+    assert report["roll"] == "reported" and report["n_mirrors"] == 10
+    for name, truth in (("axis_az", 300.0), ("axis_el", -120.0)):
+        # 4 sigma: this single seeded data set must not fail by chance (p < 1e-4)
+        assert abs(report["parameters"][name] - truth) < 4 * report["stderr"][name]
+    assert report["rms_arcsec"]["after"]["all"] < report["rms_arcsec"]["before"]["all"] / 10
+    assert len(report["mirrors"]) == 10
+    assert set(report["mirrors"][0]) >= {"residual_before_az_arcsec", "residual_after_el_arcsec",
+                                         "corrected_ins_az_deg", "consistency_after_arcsec"}
+
+
+def _bad(text_edit):
+    lines = GOOD.splitlines()
+    return "\n".join(text_edit(lines)) + "\n"
+
+
+MALFORMED = {
+    "missing column": (_bad(lambda ls: [",".join(x.split(",")[:-1]) for x in ls]),
+                       "missing column 'ins_el_deg'"),
+    "non-numeric": (_bad(lambda ls: [*ls[:2], ls[2].replace("45.0", "4x5"), *ls[3:]]),
+                    "row 3, column 'theodolite_az_deg'"),
+    "nan": (_bad(lambda ls: [*ls[:3], ls[3].replace("29.99", "nan"), *ls[4:]]),
+            "row 4, column 'ins_az_deg'"),
+    "empty": (_bad(lambda ls: [*ls[:4], ls[4].replace("59.95", ""), *ls[5:]]),
+              "row 5, column 'ins_el_deg'"),
+    "too few rows": (_bad(lambda ls: ls[:2]), "1 data rows, at least 2 needed"),
+    "unknown set": (_bad(lambda ls: [*ls[:2], ls[2].replace("azimuth", "roll"), *ls[3:]]),
+                    "row 3, column 'set': 'roll' is not one of azimuth, pitch"),
+    "not separable": (_bad(lambda ls: ls[:3]), "not separable"),
+}
+
+
+@pytest.mark.parametrize("case", list(MALFORMED))
+def test_malformed_data_exit_2_with_one_line(tmp_path, capsys, case):
+    """In-process ``cli.main`` (the same code path; the subprocess case is below)."""
+    text, needle = MALFORMED[case]
+    data, out = tmp_path / "bad.csv", tmp_path / "fit.json"
+    data.write_text(text)
+    assert main(["collimation", "fit", str(data), "--json", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1, captured.err
+    assert needle in captured.err and str(data) in captured.err
+    assert not out.exists() and captured.out == ""
+
+
+def test_malformed_data_subprocess_exit_code(tmp_path):
+    data, out = tmp_path / "bad.csv", tmp_path / "fit.json"
+    data.write_text(MALFORMED["unknown set"][0])
+    result = run_cli("fit", str(data), "--json", str(out))
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()
+
+
+def test_bad_flag_exits_2(tmp_path, capsys):
+    data = tmp_path / "cal.csv"
+    data.write_text(GOOD)
+    assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "-1"]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_figures_command_writes_pngs_and_reports_the_disagreement(tmp_path, capsys):
+    assert main(["collimation", "figures", str(tmp_path)]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == [f"fig{i}.png" for i in (3, 4, 5, 6)]
+    for name in names:
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "at β = 60°, Δβ is almost equal to γ: Δβ(60°) / γ = 0.001512 -> DOES NOT HOLD" \
+        in capsys.readouterr().out
