@@ -27,17 +27,34 @@ KEY_LABELS = {
     "errors.pixel_relation": ("pixel", "pixel error between targets"),
     "errors.evaluation": ("", "evaluation"),
 }
-MAX_LINES = 8
+MAX_LINES = 12
+UNIT_SUFFIXES = ("deg_per_h", "deg_per_s", "arcsec", "arcmin", "mrad", "deg", "px", "hz", "m",
+                 "s", "g")
+DIST_FIELDS = ("bound", "sigma", "value", "center", "mean")
+
+
+def _split_key(key: str) -> tuple[str, str]:
+    """(name, unit) of a sweep key: 'params.pitch_span_deg' -> ('pitch span', 'deg')."""
+    parts = key.split(".")
+    name = " ".join(parts[-2:]) if parts[-1] in DIST_FIELDS and len(parts) > 2 else parts[-1]
+    for unit in UNIT_SUFFIXES:
+        stem = name.split(" ")[0]
+        if stem.endswith("_" + unit):
+            return name.replace("_" + unit, "", 1).replace("_", " "), unit
+    return name.replace("_", " "), ""
 
 
 def key_label(key: str) -> str:
     """Axis label of a sweep key, with unit."""
-    return KEY_LABELS.get(key, (key, key))[1]
+    if key in KEY_LABELS:
+        return KEY_LABELS[key][1]
+    name, unit = _split_key(key)
+    return f"{name} [{unit}]" if unit else name
 
 
 def short_label(key: str, value: Any) -> str:
     """Compact 'name=value' of a sweep key for legends and titles."""
-    short = KEY_LABELS.get(key, (key.split(".")[-1], ""))[0]
+    short = KEY_LABELS[key][0] if key in KEY_LABELS else _split_key(key)[0]
     return f"{short}={_fmt(value)}" if short else _fmt(value)
 
 
@@ -107,12 +124,15 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         rest = [k for k in study.sweep_keys if k not in group]
         row_keys = [k for k in rest if _is_categorical(data, k)]
         line_keys = [k for k in rest if k not in row_keys]
+        # a zipped group moves together: its first key names the line
+        named = [k for k in line_keys if partners[k][0] == k]
         rows, _ = _combos(data, row_keys, 4)
         lines, thinned = _combos(data, line_keys, MAX_LINES)
         few = len(lines) <= 3
         xs = data[group].drop_duplicates().reset_index(drop=True)
         numeric = len(group) == 1
-        fig = Figure(figsize=(5.0 * len(variants), 3.6 * len(rows) + 0.6), layout="constrained")
+        fig = Figure(figsize=(max(6.5, 5.0 * len(variants)), 3.6 * len(rows) + 0.8),
+                     layout="constrained")
         axes = fig.subplots(len(rows), len(variants), squeeze=False, sharex=True, sharey=True)
         for (r, row), (c, variant) in itertools.product(enumerate(rows), enumerate(variants)):
             ax = axes[r, c]
@@ -123,7 +143,8 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
                 x = sel[key].to_numpy(float) if numeric else sel["index"].to_numpy()
                 color = f"C{i % 10}"
                 label = ", ".join(short_label(k, v) for k, v in zip(line_keys, line,
-                                                                     strict=True)) or None
+                                                                     strict=True)
+                                  if k in named) or None
                 ax.plot(x, sel["p50"], "-o", color=color, ms=3, label=label)
                 if few:
                     ax.fill_between(x, sel["p50"], sel["p95"], color=color, alpha=0.2, lw=0)
@@ -163,13 +184,17 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
             ax0.set_yscale("log")
         else:
             ax0.set_ylim(bottom=0)
-        if ax0.get_legend_handles_labels()[1]:
-            ax0.legend(fontsize=7, loc="best",
-                       title="thinned to 8 lines" if thinned else None, title_fontsize=7)
+        n_labels = len(ax0.get_legend_handles_labels()[1])
+        if n_labels:
+            zipped = [k for k in line_keys if k not in named]
+            notes = ([f"thinned to {MAX_LINES} lines"] if thinned else []) + \
+                    ([f"{len(zipped)} zipped keys move with them"] if zipped else [])
+            ax0.legend(fontsize=6, loc="best", ncols=2 if n_labels > 6 else 1,
+                       title="; ".join(notes) or None, title_fontsize=6)
         ci = f"{study.header.confidence:.0%}"
         style = ("line p50, band to p95, dotted p99, × max" if few
                  else "solid p50, dashed p95")
-        fig.suptitle(f"{study.header.name}: {m.label} — {style}; bars: {ci} CI of p95",
+        fig.suptitle(f"{study.header.name}: {m.label}\n{style}; bars: {ci} CI of p95",
                      fontsize=9)
         figures.append((f"trend_{key.replace('.', '_')}.png", fig))
     return figures

@@ -64,11 +64,14 @@ class System(Protocol):
 
 _REGISTRY = {
     "ground": "montecarlo.ground_study:GroundSystem",
+    "air": "montecarlo.param_systems:AIR",
+    "collimation": "montecarlo.param_systems:COLLIMATION",
 }
 SYSTEM_NAMES = tuple(_REGISTRY)
 
 
 def get_system(name: str) -> System:
-    """The registered system of that name (KeyError if none)."""
-    module, cls = _REGISTRY[name].split(":")
-    return getattr(importlib.import_module(module), cls)()
+    """The registered system of that name (KeyError if none): a class is instantiated."""
+    module, attr = _REGISTRY[name].split(":")
+    obj = getattr(importlib.import_module(module), attr)
+    return obj() if isinstance(obj, type) else obj
