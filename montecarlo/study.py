@@ -204,12 +204,19 @@ def load_study(path: str | Path, *, trials: int | None = None, seed: int | None 
         raise InputError(f"{path}: no such study file") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
+    return study_from_dict(raw, path, trials=trials, seed=seed)
 
+
+def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
+                    trials: int | None = None, seed: int | None = None) -> Study:
+    """Validate and expand a study given as a dict (the parsed TOML); ``path`` labels errors."""
+    path = Path(path)
+    raw = copy.deepcopy(raw)
     header_raw = raw.pop("study", None)
     if not isinstance(header_raw, dict):
         raise InputError(f"{path}: study: required table [study] is missing")
     header_raw = dict(header_raw)
-    header_raw.setdefault("name", path.stem)
+    header_raw.setdefault("name", path.stem.strip("<>") or "study")
     if trials is not None:
         header_raw["trials"] = trials
     if seed is not None:
