@@ -227,6 +227,12 @@ class PointStats:
     metrics: dict[tuple[str, str], MetricStats] = field(default_factory=dict)
     invalid: dict[str, dict[str, int]] = field(default_factory=dict)
     blocks: set[int] = field(default_factory=set)
+    hist_matrix: np.ndarray | None = None
+    """Set by a fast kernel: the histograms of all metrics as rows of one matrix (each
+    MetricStats.hist is a view of its row). Not pickled: each metric pickles its own row."""
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "hist_matrix": None}
 
     def add_block(self, block: int, values: dict[tuple[str, str], np.ndarray],
                   invalid: dict[str, dict[str, int]]) -> None:

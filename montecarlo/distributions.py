@@ -95,17 +95,20 @@ class Streams:
         seq = np.random.SeedSequence(self.seed, spawn_key=key)
         return np.random.Generator(np.random.PCG64(seq))
 
-    def uniform(self, source: str, n: int) -> np.ndarray:
-        """``n`` standardised uniform draws on [-1, 1)."""
-        return 2.0 * self.generator(source).random(n) - 1.0
-
-    def normal(self, source: str, n: int) -> np.ndarray:
-        """``n`` standard normal draws."""
-        return self.generator(source).standard_normal(n)
+    def fill_standard(self, dist: Distribution, source: str, out: np.ndarray) -> np.ndarray:
+        """Fill ``out`` with standardised draws of a random source: U(-1, 1) or N(0, 1)."""
+        gen = self.generator(source)
+        if dist.kind == "uniform":
+            gen.random(out=out)
+            out *= 2.0
+            out -= 1.0
+        else:
+            gen.standard_normal(out=out)
+        return out
 
     def standard(self, dist: Distribution, source: str, n: int) -> np.ndarray:
-        """Standardised draws for a random source (uniform or normal)."""
-        return self.uniform(source, n) if dist.kind == "uniform" else self.normal(source, n)
+        """``n`` standardised draws of a random source (uniform or normal)."""
+        return self.fill_standard(dist, source, np.empty(n))
 
 
 def corner_signs(first_trial: int, n: int, n_corners: int) -> np.ndarray:
@@ -119,31 +122,28 @@ def corner_signs(first_trial: int, n: int, n_corners: int) -> np.ndarray:
     return 2.0 * bits - 1.0
 
 
-def correlated_pair(
-    dist: Distribution, relation: str | float, streams: Streams, source: str, n: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Standardised draws of one error source seen by two targets, A and B.
+def fill_pair(dist: Distribution, relation: str | float, streams: Streams, source: str,
+              out_a: np.ndarray, out_b: np.ndarray) -> None:
+    """Standardised draws of one error source seen by two targets, A and B, in place.
 
     ``relation`` is "common" (B = A), "independent", or a correlation coefficient rho in [-1, 1].
     A's draws are the same whatever the relation (they come from stream ``source + ':a'``).
     Normal sources: ``z_B = rho z_A + sqrt(1 - rho^2) z_2``. Uniform sources keep uniform
     marginals through a Gaussian copula whose normal correlation ``2 sin(pi rho / 6)`` gives the
     uniforms a Pearson correlation of exactly rho.
-
-    Returns
-    -------
-    z_a, z_b : ndarray, shape (n,)
     """
     rho = {"common": 1.0, "independent": 0.0}.get(relation, relation)  # type: ignore[arg-type]
-    z_a = streams.standard(dist, source + ":a", n)
+    streams.fill_standard(dist, source + ":a", out_a)
     if rho == 1.0:
-        return z_a, z_a
-    z_2 = streams.standard(dist, source + ":b", n)
+        out_b[...] = out_a
+        return
+    streams.fill_standard(dist, source + ":b", out_b)
     if rho == 0.0:
-        return z_a, z_2
+        return
     if dist.kind == "normal":
-        return z_a, rho * z_a + np.sqrt(1.0 - rho**2) * z_2
+        out_b[...] = rho * out_a + np.sqrt(1.0 - rho**2) * out_b
+        return
     r = 2.0 * np.sin(np.pi * rho / 6.0)
-    n_a = special.ndtri((z_a + 1.0) / 2.0)
-    n_2 = special.ndtri((z_2 + 1.0) / 2.0)
-    return z_a, 2.0 * special.ndtr(r * n_a + np.sqrt(1.0 - r**2) * n_2) - 1.0
+    n_a = special.ndtri((out_a + 1.0) / 2.0)
+    n_2 = special.ndtri((out_b + 1.0) / 2.0)
+    out_b[...] = 2.0 * special.ndtr(r * n_a + np.sqrt(1.0 - r**2) * n_2) - 1.0

@@ -19,17 +19,23 @@ point runs exactly 2**k trials, the corners; its ``max`` is the worst case of Ta
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from montecarlo import aggregate as agg
 from montecarlo import ground
+from montecarlo import ground_kernel as gk
+from montecarlo.aggregate import PointStats
 from montecarlo.camera import Camera
-from montecarlo.distributions import Distribution, Streams, corner_signs, correlated_pair
-from montecarlo.invalid import count_by_reason
+from montecarlo.distributions import Distribution, Streams, corner_signs, fill_pair
+from montecarlo.ground import SOLVERS
+from montecarlo.invalid import Invalid
 from montecarlo.metrics import AXIS_METRICS, ROTATION_METRICS
+from montecarlo.rotations import mounting_matrix
 from montecarlo.schema import Source, Strict, to_distribution
 from montecarlo.systems import BlockInvalid, BlockValues, Metric
 
@@ -147,6 +153,25 @@ def _pixel_corner_names(relation: str | float) -> tuple[str, ...]:
     return ("pixel_a_x", "pixel_a_z", "pixel_b_x", "pixel_b_z")
 
 
+def _invalid_counts(flag_counts: np.ndarray) -> dict[str, int]:
+    """Invalid trials per reason (and "total") from counts of each flag value."""
+    values = np.arange(flag_counts.size)
+    counts = {"total": int(flag_counts[1:].sum())}
+    for reason in Invalid:
+        c = int(flag_counts[(values & reason) != 0].sum())
+        if c:
+            counts[str(reason.name)] = c
+    return counts
+
+
+@functools.lru_cache(maxsize=16)
+def _repeated_matrix(elements: tuple[float, ...]) -> np.ndarray:
+    """A fixed C_b^a as (9, SUB_CHUNK) rows for the kernel (read-only, cached per process)."""
+    C = np.repeat(np.array(elements).reshape(9, 1), gk.SUB_CHUNK, axis=1)
+    C.flags.writeable = False
+    return C
+
+
 class GroundSystem:
     """Seed 000 ground calibration as a :class:`montecarlo.systems.System`."""
 
@@ -185,51 +210,111 @@ class GroundSystem:
                                             prepared.pixel))
         return requested if random else 1 << len(prepared.corners)
 
-    def _draw(self, prepared: PreparedGround, name: str, dist: Distribution, streams: Streams,
-              signs: np.ndarray, n: int) -> np.ndarray:
+    @staticmethod
+    def _fill(p: PreparedGround, name: str, dist: Distribution, streams: Streams,
+              signs: np.ndarray, out: np.ndarray) -> None:
+        """Values of one scalar source for a block of trials, in place."""
         if dist.is_corner:
-            return dist.from_standard(signs[prepared.corners.index(name)])
-        if dist.is_random:
-            return dist.from_standard(streams.standard(dist, name, n))
-        return np.full(n, dist.location)
+            out[...] = dist.from_standard(signs[p.corners.index(name)])
+        elif dist.is_random:
+            streams.fill_standard(dist, name, out)
+            out *= dist.scale
+            out += dist.location
+        else:
+            out[...] = dist.location
 
-    def _pixel_errors(self, p: PreparedGround, streams: Streams, signs: np.ndarray, n: int
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Image errors of targets A and B, shape (n, 2) each [px]."""
+    def draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int
+              ) -> tuple[tuple[np.ndarray | float, ...], np.ndarray]:
+        """True mounting angles [rad] and the error rows of a block of trials.
+
+        Returns
+        -------
+        true : (psi, theta, gamma), floats if fixed, else arrays of shape (n,)
+        errors : (8, n) rows dx, dy, dh1, dh [m], then the pixel errors of A (x, z) and of
+            B (x, z) [px].
+        """
+        signs = corner_signs(first_trial, n, len(p.corners))
+        true: list[np.ndarray | float] = []
+        for name, dist in zip(MOUNTING_SOURCES, p.mounting, strict=True):
+            if dist.is_corner or dist.is_random:
+                true.append(np.empty(n))
+                self._fill(p, name, dist, streams, signs, true[-1])
+            else:
+                true.append(dist.location)
+        errors = np.empty((8, n))
+        for row, (name, dist) in enumerate(p.placement.items()):
+            self._fill(p, name, dist, streams, signs, errors[row])
+        pix = errors[4:]
         if p.pixel.is_corner:
             names = _pixel_corner_names(p.relation)
-            s = [signs[p.corners.index(k)] for k in names]
-            a = np.stack(s[:2], -1)
-            b = a if len(s) == 2 else np.stack(s[2:], -1)
-            return p.pixel.from_standard(a), p.pixel.from_standard(b)
-        if p.pixel.is_random:
-            xa, xb = correlated_pair(p.pixel, p.relation, streams, "pixel_x", n)
-            za, zb = correlated_pair(p.pixel, p.relation, streams, "pixel_z", n)
-            return (p.pixel.from_standard(np.stack([xa, za], -1)),
-                    p.pixel.from_standard(np.stack([xb, zb], -1)))
-        fixed = np.full((n, 2), p.pixel.location)
-        return fixed, fixed
+            rows = [signs[p.corners.index(k)] for k in names]
+            pix[...] = p.pixel.from_standard(np.stack(rows if len(rows) == 4 else rows * 2))
+        elif p.pixel.is_random:
+            fill_pair(p.pixel, p.relation, streams, "pixel_x", pix[0], pix[2])
+            fill_pair(p.pixel, p.relation, streams, "pixel_z", pix[1], pix[3])
+            pix *= p.pixel.scale
+            pix += p.pixel.location
+        else:
+            pix[...] = p.pixel.location
+        return tuple(true), errors
 
     def simulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
                        n: int) -> tuple[BlockValues, BlockInvalid]:
+        """Per-trial metrics through the literal reference implementation (montecarlo.ground)."""
         p = prepared
-        signs = corner_signs(first_trial, n, len(p.corners))
-        true = tuple(self._draw(p, name, d, streams, signs, n)
-                     for name, d in zip(MOUNTING_SOURCES, p.mounting, strict=True))
-        errs = {k: self._draw(p, k, d, streams, signs, n) for k, d in p.placement.items()}
-        pix_a, pix_b = self._pixel_errors(p, streams, signs, n)
+        true, e = self.draws(p, streams, first_trial, n)
         solutions = ground.simulate(
-            p.camera, true, p.L, p.H, dx=errs["dx_m"], dy=errs["dy_m"], dh1=errs["dh1_m"],
-            dh=errs["dh_m"], pixel_error_a=pix_a, pixel_error_b=pix_b, solvers=p.variants)
+            p.camera, true, p.L, p.H, dx=e[0], dy=e[1], dh1=e[2], dh=e[3],
+            pixel_error_a=e[4:6].T, pixel_error_b=e[6:8].T, solvers=p.variants)
         values: BlockValues = {}
         invalid: BlockInvalid = {}
         for variant, sol in solutions.items():
             for metric, v in ground.solution_metrics(sol, true).items():
                 values[(variant, metric)] = v
-            counts = count_by_reason(sol.invalid)
-            invalid[variant] = {"total": int(np.count_nonzero(sol.invalid)),
-                                **{k: int(c) for k, c in counts.items() if c}}
+            invalid[variant] = _invalid_counts(np.bincount(sol.invalid, minlength=256))
         return values, invalid
+
+    def accumulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
+                         n: int, block: int, stats: PointStats) -> None:
+        """The same trials through the fused kernel, aggregated straight into ``stats``."""
+        p = prepared
+        true, e = self.draws(p, streams, first_trial, n)
+        variants = [v for v in SOLVERS if v in p.variants]
+        keys = [(v, m) for v in variants for m in gk.METRIC_ORDER]
+        if stats.hist_matrix is None:
+            stats.hist_matrix = np.zeros((len(keys), agg.N_BINS), np.int64)
+            for r, key in enumerate(keys):
+                stats.metrics[key] = agg.MetricStats(hist=stats.hist_matrix[r])
+        if all(isinstance(a, float) for a in true):
+            C = _repeated_matrix(tuple(mounting_matrix(*true).ravel()))
+        else:
+            C = np.ascontiguousarray(mounting_matrix(*true).reshape(n, 9).T)
+        cam = p.camera
+        acc = gk.new_stats(len(keys))
+        flag_counts = np.zeros((2, 256), np.int64)
+        for s in range(0, n, gk.SUB_CHUNK):
+            m = min(gk.SUB_CHUNK, n - s)
+            flags = np.empty((2, m), np.uint16)
+            fields = np.empty((2 * gk.N_FIELDS, m))
+            gk.solve_chunk(C[:, :m] if C.shape[1] == gk.SUB_CHUNK else C[:, s:s + m],
+                           p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
+                           cam.n_z / 2.0, e[:, s:s + m], flags, fields)
+            values = np.empty((len(keys), m))
+            for j, v in enumerate(variants):
+                i = SOLVERS.index(v)
+                gk.metrics_from_fields(fields[i * gk.N_FIELDS:(i + 1) * gk.N_FIELDS],
+                                       values[6 * j:6 * j + 6])
+                flag_counts[i] += np.bincount(flags[i], minlength=256)
+            gk.accumulate(values, stats.hist_matrix, acc, np.empty(m, np.int64))
+        for r, key in enumerate(keys):
+            count, mean, m2, lo, hi = acc[r]
+            ms = stats.metrics[key]
+            ms.blocks[block] = (int(count), float(mean), float(m2)) if count else (0, 0.0, 0.0)
+            ms.minimum = min(ms.minimum, float(lo))
+            ms.maximum = max(ms.maximum, float(hi))
+        for v in variants:
+            stats._add_invalid({v: _invalid_counts(flag_counts[SOLVERS.index(v)])})
+        stats.blocks.add(block)
 
     def describe(self, prepared: PreparedGround) -> list[str]:
         p = prepared

@@ -4,20 +4,27 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from montecarlo.distributions import Distribution, Streams, corner_signs, correlated_pair
+from montecarlo.distributions import Distribution, Streams, corner_signs, fill_pair
 
 N = 200_000
+UNIFORM = Distribution("uniform", 0.0, 1.0)
+
+
+def correlated_pair(dist, relation, streams, source, n):
+    a, b = np.empty(n), np.empty(n)
+    fill_pair(dist, relation, streams, source, a, b)
+    return a, b
 
 
 def test_streams_are_common_across_points_only_when_asked():
-    a = Streams(1, point=0, block=3).uniform("dx_m", 100)
-    b = Streams(1, point=7, block=3).uniform("dx_m", 100)
+    a = Streams(1, point=0, block=3).standard(UNIFORM, "dx_m", 100)
+    b = Streams(1, point=7, block=3).standard(UNIFORM, "dx_m", 100)
     assert np.array_equal(a, b)
-    c = Streams(1, point=7, block=3, common=False).uniform("dx_m", 100)
-    d = Streams(1, point=0, block=3, common=False).uniform("dx_m", 100)
+    c = Streams(1, point=7, block=3, common=False).standard(UNIFORM, "dx_m", 100)
+    d = Streams(1, point=0, block=3, common=False).standard(UNIFORM, "dx_m", 100)
     assert not np.array_equal(c, d)
-    assert not np.array_equal(a, Streams(1, point=0, block=4).uniform("dx_m", 100))
-    assert not np.array_equal(a, Streams(1, point=0, block=3).uniform("dy_m", 100))
+    assert not np.array_equal(a, Streams(1, point=0, block=4).standard(UNIFORM, "dx_m", 100))
+    assert not np.array_equal(a, Streams(1, point=0, block=3).standard(UNIFORM, "dy_m", 100))
 
 
 def test_streams_match_seedsequence_spawn():
