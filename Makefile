@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all lint nightly clean
+.PHONY: install run test test-all lint nightly bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -25,6 +25,9 @@ test-all: install lint
 
 nightly: install
 	$(BIN)/montecarlo nightly
+
+bench: install
+	$(BIN)/montecarlo bench
 
 lint: install
 	$(BIN)/ruff check .

@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
-from scipy import stats
+
+if TYPE_CHECKING:  # pandas and scipy are imported only where summaries are made
+    import pandas as pd
 
 MANTISSA_BITS = 10
 MIN_EXP = -40
@@ -93,6 +95,8 @@ def order_statistic_ranks(n: int, p: float, confidence: float) -> tuple[int, int
     probability ``P(r <= B <= s - 1) >= confidence``, B ~ Binomial(n, p). A rank outside
     1..n is returned as 0 or n + 1 (that end of the interval cannot be bounded).
     """
+    from scipy import stats  # main process only (workers never finalise)
+
     alpha = 1.0 - confidence
     k = max(1, math.ceil(p * n - 1e-9))
     r = int(stats.binom.ppf(alpha / 2.0, n, p))
@@ -262,6 +266,8 @@ class PointStats:
         ``signed[metric]`` True means percentiles and max are of the magnitude |x| (the mean and
         std stay signed), recorded in the column ``percentiles_of``.
         """
+        import pandas as pd
+
         rows = []
         for (variant, metric), m in sorted(self.metrics.items()):
             of_abs = signed[metric]

@@ -60,8 +60,6 @@ def _nonnegative_int(text: str) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from montecarlo.outputs import write_outputs
-    from montecarlo.report import spec_verdicts
     from montecarlo.runner import Checkpoints, RunOptions, run_study
     from montecarlo.study import load_study
 
@@ -69,8 +67,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("results") / study.header.name
     options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
                          chunk_size=args.chunk_size, progress=not args.quiet,
-                         checkpoint_dir=out.parent / ".checkpoints")
+                         checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
     result = run_study(study, options)
+
+    from montecarlo.outputs import write_outputs  # matplotlib: only once results exist
+    from montecarlo.report import spec_verdicts
+
     write_outputs(result, out, options)
     Checkpoints(options.checkpoint_dir, study).remove()
     verdicts = spec_verdicts(result, result.to_frame())
@@ -278,6 +280,14 @@ def _add_collimation_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_collimation_figures)
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from montecarlo.bench import format_bench, run_bench
+
+    result = run_bench(quick=args.quick, repeats=args.repeats)
+    print(json.dumps(result, indent=2) if args.json else format_bench(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="montecarlo",
@@ -303,6 +313,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--chunk-size", type=_positive_int,
                    help="trials per task, a multiple of the block size (results do not change)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--reference", action="store_true",
+                   help="use the literal reference implementation instead of the fast kernel")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("nightly", help="rerun Table 1 and the trend checks; exit 1 on regression")
@@ -311,6 +323,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-jobs", type=_positive_int, default=2)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_nightly)
+
+    p = sub.add_parser("bench", help="trials per second of the reference and fast ground paths")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--quick", action="store_true", help="small sizes (seconds, for tests)")
+    p.add_argument("--repeats", type=_positive_int, default=5, help="timed runs per figure (5)")
+    p.set_defaults(func=_cmd_bench)
     _add_air_commands(sub)
     _add_transfer_alignment_commands(sub)
     _add_collimation_commands(sub)

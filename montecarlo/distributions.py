@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy import special
 
 Kind = Literal["fixed", "uniform", "normal", "corners"]
 
@@ -143,6 +142,8 @@ def fill_pair(dist: Distribution, relation: str | float, streams: Streams, sourc
     if dist.kind == "normal":
         out_b[...] = rho * out_a + np.sqrt(1.0 - rho**2) * out_b
         return
+    from scipy import special
+
     r = 2.0 * np.sin(np.pi * rho / 6.0)
     n_a = special.ndtri((out_a + 1.0) / 2.0)
     n_2 = special.ndtri((out_b + 1.0) / 2.0)

@@ -22,6 +22,7 @@ import numba as nb
 import numpy as np
 
 from montecarlo import aggregate as agg
+from montecarlo import ground_study
 from montecarlo.invalid import Invalid
 
 _BEHIND = int(Invalid.BEHIND_SENSOR)
@@ -246,8 +247,7 @@ def solve_chunk(C: np.ndarray, L: float, H: float, kx: float, kz: float, half_nx
         nb.set_num_threads(previous)
 
 
-METRIC_ORDER = ("rotation_angle", "eq18_angle", "table1_angle", "delta_psi", "delta_theta",
-                "delta_gamma")
+METRIC_ORDER = ground_study.METRIC_ORDER
 """Metric rows produced by :func:`metrics_from_fields` (the names of montecarlo.metrics)."""
 
 

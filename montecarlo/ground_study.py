@@ -28,12 +28,11 @@ from pydantic import Field, field_validator, model_validator
 
 from montecarlo import aggregate as agg
 from montecarlo import ground
-from montecarlo import ground_kernel as gk
 from montecarlo.aggregate import PointStats
 from montecarlo.camera import Camera
 from montecarlo.distributions import Distribution, Streams, corner_signs, fill_pair
 from montecarlo.ground import SOLVERS
-from montecarlo.invalid import Invalid
+from montecarlo.invalid import reason_counts
 from montecarlo.metrics import AXIS_METRICS, ROTATION_METRICS
 from montecarlo.rotations import mounting_matrix
 from montecarlo.schema import Source, Strict, to_distribution
@@ -153,23 +152,19 @@ def _pixel_corner_names(relation: str | float) -> tuple[str, ...]:
     return ("pixel_a_x", "pixel_a_z", "pixel_b_x", "pixel_b_z")
 
 
-def _invalid_counts(flag_counts: np.ndarray) -> dict[str, int]:
-    """Invalid trials per reason (and "total") from counts of each flag value."""
-    values = np.arange(flag_counts.size)
-    counts = {"total": int(flag_counts[1:].sum())}
-    for reason in Invalid:
-        c = int(flag_counts[(values & reason) != 0].sum())
-        if c:
-            counts[str(reason.name)] = c
-    return counts
-
-
 @functools.lru_cache(maxsize=16)
 def _repeated_matrix(elements: tuple[float, ...]) -> np.ndarray:
     """A fixed C_b^a as (9, SUB_CHUNK) rows for the kernel (read-only, cached per process)."""
+    from montecarlo import ground_kernel as gk
+
     C = np.repeat(np.array(elements).reshape(9, 1), gk.SUB_CHUNK, axis=1)
     C.flags.writeable = False
     return C
+
+
+METRIC_ORDER = ("rotation_angle", "eq18_angle", "table1_angle", "delta_psi", "delta_theta",
+                "delta_gamma")
+"""The metrics per solver variant, in the order of the fast kernel's rows."""
 
 
 class GroundSystem:
@@ -271,16 +266,18 @@ class GroundSystem:
         for variant, sol in solutions.items():
             for metric, v in ground.solution_metrics(sol, true).items():
                 values[(variant, metric)] = v
-            invalid[variant] = _invalid_counts(np.bincount(sol.invalid, minlength=256))
+            invalid[variant] = reason_counts(np.bincount(sol.invalid, minlength=256))
         return values, invalid
 
     def accumulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
                          n: int, block: int, stats: PointStats) -> None:
         """The same trials through the fused kernel, aggregated straight into ``stats``."""
+        from montecarlo import ground_kernel as gk  # numba: loaded only where kernels run
+
         p = prepared
         true, e = self.draws(p, streams, first_trial, n)
         variants = [v for v in SOLVERS if v in p.variants]
-        keys = [(v, m) for v in variants for m in gk.METRIC_ORDER]
+        keys = [(v, m) for v in variants for m in METRIC_ORDER]
         if stats.hist_matrix is None:
             stats.hist_matrix = np.zeros((len(keys), agg.N_BINS), np.int64)
             for r, key in enumerate(keys):
@@ -313,7 +310,7 @@ class GroundSystem:
             ms.minimum = min(ms.minimum, float(lo))
             ms.maximum = max(ms.maximum, float(hi))
         for v in variants:
-            stats._add_invalid({v: _invalid_counts(flag_counts[SOLVERS.index(v)])})
+            stats._add_invalid({v: reason_counts(flag_counts[SOLVERS.index(v)])})
         stats.blocks.add(block)
 
     def describe(self, prepared: PreparedGround) -> list[str]:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import enum
 
 import numpy as np
-import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 FLAG_DTYPE = np.uint16
@@ -37,17 +36,19 @@ class Invalid(enum.IntFlag):
     """The sine of yaw in eq. (14) exceeds 1 in magnitude."""
 
 
-def reason_names(flags: int) -> list[str]:
-    """Names of the reasons set in one flag value, e.g. ``['OUTSIDE_FOV']``."""
-    return [r.name for r in Invalid if r.name and flags & r]
+def reason_counts(flag_counts: np.ndarray) -> dict[str, int]:
+    """Invalid trials per reason name, and "total", from counts of each flag value.
 
-
-def count_by_reason(flags: ArrayLike) -> pd.Series:
-    """Number of trials with each reason set (a trial with two reasons counts under both)."""
-    flags = np.asarray(flags, dtype=np.int64)
-    return pd.Series(
-        {r.name: int(np.count_nonzero(flags & r)) for r in Invalid if r.name}, dtype=np.int64
-    )
+    ``flag_counts`` is ``np.bincount(flags, minlength=256)``; a trial with two reasons counts
+    under both.
+    """
+    values = np.arange(flag_counts.size)
+    counts = {"total": int(flag_counts[1:].sum())}
+    for reason in Invalid:
+        c = int(flag_counts[(values & reason) != 0].sum())
+        if c:
+            counts[str(reason.name)] = c
+    return counts
 
 
 def new_flags(shape: tuple[int, ...]) -> NDArray[np.uint16]:

@@ -34,9 +34,9 @@ from tqdm import tqdm
 
 from montecarlo import __version__
 from montecarlo.aggregate import VALUE_COLUMNS, PointResult, PointStats
-from montecarlo.distributions import Streams
 from montecarlo.exceptions import InputError
 from montecarlo.study import Study
+from montecarlo.tasks import PointTask, run_task
 
 Backend = Literal["loky", "dask"]
 
@@ -87,32 +87,6 @@ class StudyResult:
         invalid_cols = [c for c in out.columns if c.startswith("invalid_")]
         out[invalid_cols] = out[invalid_cols].fillna(0).astype(np.int64)
         return out
-
-
-def run_task(study: Study, point: int, blocks: range, keep_trials: bool, reference: bool = False
-             ) -> tuple[int, PointStats, dict[int, dict[tuple[str, str], np.ndarray]]]:
-    """Simulate consecutive blocks of one grid point; pure function of its arguments.
-
-    Uses the system's fused ``accumulate_block`` when it has one, unless per-trial values are
-    kept or the reference implementation is asked for.
-    """
-    gp = study.points[point]
-    bs = study.block_size
-    stats = PointStats()
-    kept = {}
-    fast = None if keep_trials or reference else getattr(study.system, "accumulate_block", None)
-    for b in blocks:
-        first = b * bs
-        n = min(bs, gp.trials - first)
-        streams = Streams(study.header.seed, point, b, study.header.common_random_numbers)
-        if fast is not None:
-            fast(gp.prepared, streams, first, n, b, stats)
-            continue
-        values, invalid = study.system.simulate_block(gp.prepared, streams, first, n)
-        stats.add_block(b, values, invalid)
-        if keep_trials:
-            kept[b] = values
-    return point, stats, kept
 
 
 def _tasks(study: Study, points: list[int], chunk_blocks: int) -> list[tuple[int, range]]:
@@ -238,7 +212,7 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     """Run every grid point of ``study`` (resuming from checkpoints) and return the statistics."""
     if options.n_jobs < 1:
         raise InputError(f"--n-jobs: must be at least 1 (got {options.n_jobs})")
-    root = options.checkpoint_dir or Path("results") / ".checkpoints"
+    root = Path(options.checkpoint_dir or Path("results") / ".checkpoints")
     checkpoints = Checkpoints(root, study)
     keep = study.header.per_trial
     done: dict[int, tuple[PointResult, dict]] = {}
@@ -256,6 +230,10 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     partial: dict[int, tuple[PointStats, dict]] = {p: (PointStats(), {}) for p in todo}
 
     signed = {m.name: m.signed for _, m in study.metrics}
+    h = study.header
+    point_tasks = {p: PointTask(study.system, study.points[p].prepared, h.seed, p,
+                                h.common_random_numbers, study.block_size, study.points[p].trials)
+                   for p in todo}
     total = sum(study.points[p].trials for p in todo)
     bar = tqdm(total=total, unit="trial", unit_scale=True, file=sys.stderr, dynamic_ncols=True,
                disable=not options.progress or not tasks,
@@ -265,7 +243,7 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
             with _backend(options) as n_jobs:
                 parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
                 for point, stats, kept in parallel(
-                        joblib.delayed(run_task)(study, p, blocks, keep, options.reference)
+                        joblib.delayed(run_task)(point_tasks[p], blocks, keep, options.reference)
                         for p, blocks in tasks):
                     acc, trials = partial[point]
                     acc.merge(stats)
