@@ -43,12 +43,17 @@ seed 001: patent CN102288133B (2013), eqs. (1)-(6); NOTES.md, "Seed 001 - cautio
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from montecarlo.camera import Camera, pixels_from_direction
+from montecarlo.csvio import read_table
+from montecarlo.exceptions import InputError
 from montecarlo.rotations import mounting_matrix
 
 FloatArray = NDArray[np.float64]
@@ -151,7 +156,7 @@ def imu_matrix(delta_g: ArrayLike) -> FloatArray:
     ----------
     seed 001, eq. (1) (printed to first order in the angles).
     """
-    d = np.asarray(delta_g, float)
+    d = _components(delta_g)
     return mounting_matrix(d[..., 2], d[..., 0], d[..., 1])  # seed 001, eq. (1)
 
 
@@ -318,9 +323,9 @@ class Record:
         Gimbal azimuth and pitch angles.
     los_px : ndarray, shape (..., N, 2) [px]
         Measured image position ``[x, z]`` of the target (with image noise).
-    los_px_true : ndarray, shape (..., N, 2) [px]
+    los_px_true : ndarray, shape (..., N, 2) [px], or None for measured data
         The same without image noise.
-    los_error : ndarray, shape (..., N) [rad]
+    los_error : ndarray, shape (..., N) [rad], or None for measured data
         True angle between the LOS and the target direction (the stabilisation error).
     """
 
@@ -329,8 +334,8 @@ class Record:
     eta: FloatArray
     eps: FloatArray
     los_px: FloatArray
-    los_px_true: FloatArray
-    los_error: FloatArray
+    los_px_true: FloatArray | None = None
+    los_error: FloatArray | None = None
 
 
 def integrate_gimbal(
@@ -653,32 +658,38 @@ RAW_TO_OBSERVABLE = np.array([
 
 @dataclass(frozen=True)
 class Observability:
-    """Observability of the installation angles for one experiment (one record).
+    """Observability of the installation angles in one experiment.
 
     Attributes
     ----------
-    singular_values : ndarray, shape (4,)
-        Of the stacked drift model for ``X`` scaled by 1/image noise [1/rad].
+    singular_values : ndarray, shape (4,) [1/rad]
+        Of the stacked drift model of ``X`` (divided by the image noise) once the nuisance
+        parameters are projected out.
     rank : int
-        Numerical rank for ``X`` (4 when every combination is excited).
+        Numerical rank for ``X`` (4 when every combination is seen).
     raw_rank : int
-        Rank for the five angles ``[dpx, dpz, dgx, dgy, dgz]`` (at most 4: ``dpz, dgz`` only
-        enter as their difference).
-    raw_null_vector : ndarray, shape (5,)
-        Unit direction of the five angles that the data cannot see.
+        Rank for the patent's five angles ``[dpx, dpz, dgx, dgy, dgz]``: at most 4, since
+        ``dpz`` and ``dgz`` enter only as ``delta_z = dpz - dgz``.
+    raw_null_space : ndarray, shape (5 - raw_rank, 5)
+        Orthonormal directions of the five angles that the data cannot see (for rank 4 the
+        single row ``[0, 1, 0, 0, 1] / sqrt(2)``: equal changes of ``dpz`` and ``dgz``).
     sigma : ndarray, shape (4,) [rad]
-        Cramer-Rao standard deviations of ``X`` from image noise alone, bias known.
+        Cramer-Rao standard deviation of each combination from image noise alone, the others
+        and the nuisance parameters being estimated too; ``inf`` where a combination is not
+        seen independently of the others.
     """
 
     singular_values: FloatArray
     rank: int
     raw_rank: int
-    raw_null_vector: FloatArray
+    raw_null_space: FloatArray
     sigma: FloatArray
 
 
-def observability(record: Record, camera: Camera, image_noise: float) -> Observability:
-    """Rank, singular values and Cramer-Rao bounds of the stacked drift model of one record.
+def observability(
+    record: Record, camera: Camera, image_noise: float, *, nuisance: bool = True
+) -> Observability:
+    """Rank, singular values and Cramer-Rao bounds of the stacked first-order drift model.
 
     Parameters
     ----------
@@ -686,15 +697,90 @@ def observability(record: Record, camera: Camera, image_noise: float) -> Observa
         One run (no batch axes); its ``t, gyro, eta, eps`` are used.
     camera : Camera
     image_noise : float [px]
+    nuisance : bool
+        Estimate the gyro biases and the image offset of the target beside ``X`` (as
+        :func:`montecarlo.stabilization_estimation.estimate` does); False: known.
     """
-    M = drift_matrix(record.t, record.gyro, record.eta, record.eps, camera)[..., :4]
-    A = M.reshape(-1, 4) / image_noise
-    s = np.linalg.svd(A, compute_uv=False)
-    tol = s.max() * max(A.shape) * np.finfo(float).eps
-    A_raw = A @ RAW_TO_OBSERVABLE
-    s_raw, V = np.linalg.svd(A_raw)[1:]
-    null = V[-1] * np.sign(V[-1][np.argmax(np.abs(V[-1]))])
-    with np.errstate(divide="ignore"):
-        sigma = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)))
+    M = drift_matrix(record.t, record.gyro, record.eta, record.eps, camera) / image_noise
+    X = M[..., :4].reshape(-1, 4)
+    if nuisance:
+        offset = np.broadcast_to(np.eye(2) / image_noise, (record.t.size, 2, 2))
+        Q = np.linalg.qr(np.concatenate([M[..., 4:], offset], -1).reshape(-1, 5))[0]
+        X = X - Q @ (Q.T @ X)
+    s = np.linalg.svd(X, compute_uv=False)
+    tol = 1e-9 * np.linalg.norm(X, axis=0).max()
+    _, raw_s, V = np.linalg.svd(X @ RAW_TO_OBSERVABLE, full_matrices=False)
+    raw_rank = int(np.sum(raw_s > tol))
+    null = V[raw_rank:]
+    null = null * np.sign(null[np.arange(len(null)), np.argmax(np.abs(null), axis=1)])[:, None]
+    sigma = np.empty(4)
+    for j in range(4):
+        others = np.delete(X, j, axis=1)
+        residual = X[:, j] - others @ np.linalg.lstsq(others, X[:, j], rcond=None)[0]
+        norm = np.linalg.norm(residual)
+        sigma[j] = 1.0 / norm if norm > tol else np.inf
     return Observability(singular_values=s, rank=int(np.sum(s > tol)),
-                         raw_rank=int(np.sum(s_raw > tol)), raw_null_vector=null, sigma=sigma)
+                         raw_rank=raw_rank, raw_null_space=null, sigma=sigma)
+
+
+# --------------------------------------------------------------------------------------------
+# Time-series files
+# --------------------------------------------------------------------------------------------
+
+CSV_COLUMNS = ("t_s", "gyro_x", "gyro_y", "gyro_z", "eta_rad", "eps_rad", "los_x_px", "los_z_px")
+"""Columns of a run: time [s], IMU rate [rad/s] (IMU axes), gimbal azimuth and pitch [rad],
+measured image position of the target [px] (x right, z up, from the image centre)."""
+
+MAX_GIMBAL_PITCH = np.radians(89.0)
+"""Eq. (4) divides by cos(eps): runs with |eps| beyond this are refused [rad]."""
+
+
+def write_csv(path: str | Path, record: Record) -> None:
+    """Write one run (no batch axes) as a CSV file, atomically (temporary file, then rename).
+
+    Raises
+    ------
+    InputError
+        The file cannot be written (the message names it); nothing is left behind.
+    """
+    path = Path(path)
+    columns = np.column_stack([record.t, record.gyro, record.eta, record.eps, record.los_px])
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write ({exc.strerror})") from None
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(",".join(CSV_COLUMNS) + "\n")
+            np.savetxt(f, columns, fmt="%.12g", delimiter=",")
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def read_csv(path: str | Path) -> Record:
+    """Read a run written by :func:`write_csv` or measured in the same format.
+
+    Raises
+    ------
+    InputError
+        Missing column, non-numeric value, fewer than 10 rows, times not strictly increasing,
+        or a gimbal pitch beyond ``MAX_GIMBAL_PITCH``; one line naming file, row and column.
+    """
+    table = read_table(path, CSV_COLUMNS, min_rows=10)
+    t = table["t_s"].to_numpy(float)
+    bad = np.flatnonzero(np.diff(t) <= 0.0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise InputError(f"{path}: row {i + 2}, column 't_s': {t[i]!r} is not after the "
+                         f"previous time {t[i - 1]!r}")
+    eps = table["eps_rad"].to_numpy(float)
+    bad = np.flatnonzero(np.abs(eps) > MAX_GIMBAL_PITCH)
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(f"{path}: row {i + 2}, column 'eps_rad': {eps[i]!r} is beyond "
+                         f"+-{MAX_GIMBAL_PITCH:.4f} rad (eq. (4) divides by cos(eps))")
+    return Record(t=t, gyro=table[["gyro_x", "gyro_y", "gyro_z"]].to_numpy(float),
+                  eta=table["eta_rad"].to_numpy(float), eps=eps,
+                  los_px=table[["los_x_px", "los_z_px"]].to_numpy(float))
