@@ -6,6 +6,7 @@ Every subcommand reports bad input as one line on stderr and exits with code 2.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Sequence
@@ -133,7 +134,7 @@ def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
     from montecarlo import stabilization as stab
 
     rocking, setup = _stabilization_setup(args)
-    record = stab.simulate(rocking, setup, 0.0, 0.0, 0.0, rng=0)
+    record = stab.simulate(rocking, dataclasses.replace(setup, gyro_noise=0.0), 0.0, 0.0)
     obs = stab.observability(record, setup.camera, setup.image_noise)
     print(f"rank {obs.rank} of 4 for X = [delta_px, delta_gx, delta_gy, delta_z]; "
           f"rank {obs.raw_rank} of 5 for [dpx, dpz, dgx, dgy, dgz]")

@@ -656,6 +656,11 @@ RAW_TO_OBSERVABLE = np.array([
 """``X = T [dpx, dpz, dgx, dgy, dgz]``: the patent's five angles to the four combinations."""
 
 
+RANK_TOLERANCE = 1e-6
+"""Singular values (and unexplained column norms) below this fraction of the largest column
+norm count as zero: a standard deviation a million times the best one is no estimate."""
+
+
 @dataclass(frozen=True)
 class Observability:
     """Observability of the installation angles in one experiment.
@@ -708,7 +713,7 @@ def observability(
         Q = np.linalg.qr(np.concatenate([M[..., 4:], offset], -1).reshape(-1, 5))[0]
         X = X - Q @ (Q.T @ X)
     s = np.linalg.svd(X, compute_uv=False)
-    tol = 1e-9 * np.linalg.norm(X, axis=0).max()
+    tol = RANK_TOLERANCE * np.linalg.norm(X, axis=0).max()
     _, raw_s, V = np.linalg.svd(X @ RAW_TO_OBSERVABLE, full_matrices=False)
     raw_rank = int(np.sum(raw_s > tol))
     null = V[raw_rank:]
