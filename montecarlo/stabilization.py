@@ -610,7 +610,12 @@ def _rot2(angle: ArrayLike) -> FloatArray:
 
 
 def drift_matrix(
-    t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike, camera: Camera
+    t: ArrayLike,
+    gyro: ArrayLike,
+    eta: ArrayLike,
+    eps: ArrayLike,
+    camera: Camera,
+    rate_matrix=None,
 ) -> FloatArray:
     """First-order image drift of the target per unit parameter, from the rate model.
 
@@ -627,6 +632,9 @@ def drift_matrix(
         Measured carrier rate (used for the true one).
     eta, eps : array_like, shape (..., N) [rad]
     camera : Camera
+    rate_matrix : callable, optional
+        ``H(omega, eta, eps)`` of the rate model; :func:`los_rate_matrix` if omitted
+        (:func:`patent_eq6_matrix` to see what the printed model would give).
 
     Returns
     -------
@@ -639,7 +647,8 @@ def drift_matrix(
     t = np.asarray(t, float)
     gyro = np.asarray(gyro, float)
     eta, eps = np.asarray(eta, float), np.asarray(eps, float)
-    rate = np.concatenate([los_rate_matrix(gyro, eta, eps), bias_rate_matrix(eta, eps)], -1)
+    H = (rate_matrix or los_rate_matrix)(gyro, eta, eps)
+    rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
     integrand = np.matmul(_rot2(-rho), rate)
     phi = np.matmul(_rot2(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
