@@ -106,7 +106,7 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
             zip(se.PARAMETER_NAMES, est.values, est.sigma, units, strict=True)}
     if args.json:
         print(json.dumps({
-            "file": str(args.csv), "rows": int(record.t.size), "passes": est.iterations,
+            "file": str(args.csv), "rows": int(record.t.size), "passes": est.passes,
             "converged": bool(est.converged), "residual_rms_px": float(est.residual_rms),
             "units": {"delta_*": "arcmin", "bias_*": "deg/h", "sigma": "1 standard deviation"},
             "parameters": {k: {"value": v, "sigma": s} for k, (v, s) in rows.items()},
@@ -117,7 +117,7 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     else:
         state = "converged" if est.converged else "NOT converged: raise --passes"
     print(f"installation angles (seed 001) from {args.csv}: {record.t.size} rows, "
-          f"{record.t[-1] - record.t[0]:g} s; {est.iterations} RLS passes, {state}")
+          f"{record.t[-1] - record.t[0]:g} s; {est.passes} RLS passes, {state}")
     print("angles in arc-minutes (1 arcmin = 0.2909 mrad), gyro biases in deg/h; "
           "± is one standard deviation")
     notes = {"delta_z": "= dpz - dgz (dpz and dgz are not separable)",

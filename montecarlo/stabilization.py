@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import cumulative_trapezoid
 
 from montecarlo.camera import Camera, pixels_from_direction
 from montecarlo.csvio import read_table
@@ -451,7 +452,7 @@ def simulate(
         angles = np.asarray(compensation.angles, float)
         C_gb = np.swapaxes(mounting_matrix(0.0, angles[..., 1], angles[..., 2]), -1, -2)
         C_gb = C_gb[..., None, :, :]
-        loop_bias = np.asarray(compensation.gyro_bias, float)[..., None, :]
+        loop_bias = _components(compensation.gyro_bias)[..., None, :]
         loop_rate = _matvec(C_gb, omega_m - loop_bias)
         loop_noise = _matvec(C_gb, noise)
         offset_eta, offset_eps = angles[..., 3], angles[..., 0]
@@ -604,7 +605,8 @@ def patent_eq5_matrix(
     return np.stack(rows, axis=-2)
 
 
-def _rot2(angle: ArrayLike) -> FloatArray:
+def plane_rotation(angle: ArrayLike) -> FloatArray:
+    """``[[cos a, -sin a], [sin a, cos a]]``, shape (..., 2, 2): a turn of the image plane."""
     c, s = np.cos(angle), np.sin(angle)
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
@@ -642,16 +644,14 @@ def drift_matrix(
         Columns ``[delta_px, delta_gx, delta_gy, delta_z, bias_x, bias_y, bias_z]``;
         rows ``[x_px, z_px]``.
     """
-    from scipy.integrate import cumulative_trapezoid
-
     t = np.asarray(t, float)
     gyro = np.asarray(gyro, float)
     eta, eps = np.asarray(eta, float), np.asarray(eps, float)
     H = (rate_matrix or los_rate_matrix)(gyro, eta, eps)
     rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
-    integrand = np.matmul(_rot2(-rho), rate)
-    phi = np.matmul(_rot2(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
+    integrand = np.matmul(plane_rotation(-rho), rate)
+    phi = np.matmul(plane_rotation(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
     k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
     return np.stack([k_x * phi[..., 1, :], -k_z * phi[..., 0, :]], axis=-2)
 

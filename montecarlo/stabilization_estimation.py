@@ -5,12 +5,12 @@ the first step the regressor, recursive least squares (RLS) the estimator. Here:
 
 * the measurement is the target's image position ``[x_px, z_px]`` (the drift), not its rate:
   image noise is white on the position, differencing it would correlate it;
-* the regressor rows are :func:`montecarlo.stabilization.drift_matrix` (the derived eq. (6)
-  integrated over time, image roll included) plus the column of the camera roll ``dpy``;
-* the residual is computed with the exact kinematics (:func:`predict_los`) and the RLS pass is
-  repeated about the new estimate until it no longer moves (Gauss-Newton with the first-order
-  rows): a single pass about zero is the patent's linear estimate, whose error is of the order
-  of the angles squared;
+* the residual is always computed with the exact kinematics (:func:`predict_los`);
+* the first RLS pass uses the first-order rows about zero,
+  :func:`montecarlo.stabilization.drift_matrix` (the derived eq. (6) integrated over time, image
+  roll included): alone, that is the patent's linear estimate, whose error is of the order of
+  the angles squared. Further passes use the exact Jacobian (:func:`los_jacobian`) about the
+  current estimate until the estimate no longer moves (Gauss-Newton in RLS form);
 * the state carries, beside the parameters, the target's image offset as a random walk: its
   initial value is the unknown aim point, its increments the LOS walk that white gyro noise
   drives through the loop (isotropic, density = the gyro noise density; see
@@ -246,7 +246,7 @@ class Estimate:
     values : ndarray, shape (..., 8)
         In the order of ``PARAMETER_NAMES``; angles [rad], biases [rad/s].
     covariance : ndarray, shape (..., 8, 8)
-    iterations : int
+    passes : int
         RLS passes run.
     converged : ndarray of bool, shape (...)
         The last pass moved every parameter by less than ``tol`` of its standard deviation.
@@ -256,7 +256,7 @@ class Estimate:
 
     values: FloatArray
     covariance: FloatArray
-    iterations: int
+    passes: int
     converged: NDArray[np.bool_]
     residual_rms: FloatArray
 
@@ -331,7 +331,7 @@ def estimate(
     roll_rate = stab.image_roll_rate(gyro, eta, eps)
     turn = np.concatenate([np.zeros((*roll_rate.shape[:-1], 1)),
                            0.5 * (roll_rate[..., 1:] + roll_rate[..., :-1]) * np.diff(t)], -1)
-    walk_transition = scale @ stab._rot2(turn) @ np.linalg.inv(scale)
+    walk_transition = scale @ stab.plane_rotation(turn) @ np.linalg.inv(scale)
     walk_var = None
     if gyro_noise > 0.0:
         dt = np.diff(t, prepend=t[0])[:, None]
@@ -363,7 +363,7 @@ def estimate(
     residual = los_px - predicted
     residual = residual - residual.mean(axis=-2, keepdims=True)
     rms = np.sqrt(np.mean(np.sum(residual**2, axis=-1), axis=-1))
-    return Estimate(values=params, covariance=cov, iterations=passes, converged=converged,
+    return Estimate(values=params, covariance=cov, passes=passes, converged=converged,
                     residual_rms=rms)
 
 
@@ -397,6 +397,11 @@ DEFAULT_PARAMS: dict[str, float] = {
     "max_passes": 10.0,
 }
 """Defaults of :func:`run_trials` (SI units, radians); see its docstring."""
+
+
+TRIAL_CHUNK = 32
+"""Trials simulated and estimated together; bounds the memory (about 360 MB peak for the whole
+process at 60 s and 100 Hz)."""
 
 
 def run_trials(
@@ -438,8 +443,8 @@ def run_trials(
         ``within_5pct``, ``accepted`` (1.0 if all four combinations pass the test, both for
         ``accepted``, else 0.0); ``los_rms_before``, ``los_rms_after`` [rad] (RMS of the true
         LOS error of the calibration run and of the compensated rerun), ``los_rms_ratio``
-        (after / before); ``residual_rms`` [px]; ``passes``. NaN marks a trial whose estimate
-        did not converge.
+        (after / before); ``residual_rms`` [px]; ``passes`` (RLS passes of the trial's chunk
+        of ``TRIAL_CHUNK`` trials). NaN marks a trial whose estimate did not converge.
     """
     unknown = set(params) - set(DEFAULT_PARAMS)
     if unknown:
@@ -453,23 +458,27 @@ def run_trials(
     angles = size * rng.choice([-1.0, 1.0], (n, 6))
     delta_g, delta_p = angles[:, :3], angles[:, 3:]
     bias = p["gyro_bias"] * rng.standard_normal((n, 3))
-    rocking = stab.Rocking(amplitude=np.full(3, p["rock_amplitude"]),
-                           frequency=[p["rock_freq_yaw"], p["rock_freq_pitch"],
-                                      p["rock_freq_roll"]],
-                           phase=rng.uniform(0.0, 2.0 * np.pi, (n, 3)))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (n, 3))
+    frequency = [p["rock_freq_yaw"], p["rock_freq_pitch"], p["rock_freq_roll"]]
     sim_rng, rerun_rng = rng.spawn(2)
-    run = stab.simulate(rocking, setup, delta_g, delta_p, bias, sim_rng)
-    est = estimate_record(run, setup, forgetting=p["forgetting"],
-                          max_passes=int(p["max_passes"]))
-    rerun = stab.simulate(rocking, setup, delta_g, delta_p, bias, rerun_rng,
-                          compensation=est.compensation())
 
+    chunks = []
+    for lo in range(0, n, TRIAL_CHUNK):
+        part = slice(lo, min(lo + TRIAL_CHUNK, n))
+        rocking = stab.Rocking(np.full(3, p["rock_amplitude"]), frequency, phase[part])
+        run = stab.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part], sim_rng)
+        est = estimate_record(run, setup, forgetting=p["forgetting"],
+                              max_passes=int(p["max_passes"]))
+        rerun = stab.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part],
+                              rerun_rng, compensation=est.compensation())
+        chunks.append((est, run.los_error, rerun.los_error))
+
+    values = np.concatenate([c[0].values for c in chunks])[:, [0, 1, 2, 3, ROLL]]
+    sigma = np.concatenate([c[0].sigma for c in chunks])[:, [0, 1, 2, 3, ROLL]]
+    bad = ~np.concatenate([c[0].converged for c in chunks])
     truth = np.stack([delta_p[:, 0], delta_g[:, 0], delta_g[:, 1],
                       delta_p[:, 2] - delta_g[:, 2], delta_p[:, 1]], axis=-1)
-    values = est.values[:, [0, 1, 2, 3, ROLL]]
-    sigma = est.sigma[:, [0, 1, 2, 3, ROLL]]
     error = values - truth
-    bad = ~est.converged
     out: dict[str, FloatArray] = {}
     for j, name in enumerate(("dpx", "dgx", "dgy", "dz", "dpy")):
         out[f"{name}_true"] = truth[:, j]
@@ -481,11 +490,11 @@ def run_trials(
     out["within_2sigma"] = in_2s.astype(float)
     out["within_5pct"] = in_5p.astype(float)
     out["accepted"] = (in_2s & in_5p).astype(float)
-    out["los_rms_before"] = np.sqrt(np.mean(run.los_error**2, axis=-1))
-    out["los_rms_after"] = np.sqrt(np.mean(rerun.los_error**2, axis=-1))
+    out["los_rms_before"] = np.concatenate([np.sqrt(np.mean(c[1] ** 2, axis=-1)) for c in chunks])
+    out["los_rms_after"] = np.concatenate([np.sqrt(np.mean(c[2] ** 2, axis=-1)) for c in chunks])
     out["los_rms_ratio"] = out["los_rms_after"] / out["los_rms_before"]
-    out["residual_rms"] = est.residual_rms
-    out["passes"] = np.full(n, float(est.iterations))
+    out["residual_rms"] = np.concatenate([c[0].residual_rms for c in chunks])
+    out["passes"] = np.concatenate([np.full(c[1].shape[0], float(c[0].passes)) for c in chunks])
     for key, value in out.items():
         out[key] = np.where(bad, np.nan, value).astype(np.float64)
     return out

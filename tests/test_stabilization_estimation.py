@@ -81,7 +81,7 @@ def test_rls_with_random_walk_equals_batch_generalised_least_squares():
     """The walk state: compare with the explicit covariance of the accumulated increments."""
     n, p = 25, 2
     g, rows, _ = _problem(n, p, seed=1)
-    F = st._rot2(g.uniform(-0.1, 0.1, n))
+    F = st.plane_rotation(g.uniform(-0.1, 0.1, n))
     q = g.uniform(0.01, 0.05, (n, 2))
     obs = g.normal(size=(n, 2))
     r = 0.04
@@ -129,7 +129,7 @@ def test_estimate_recovers_the_angles_from_exact_kinematics():
     pass is off by more than 5 sigma (second-order terms) but within 5 % for these angles."""
     run = st.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=11)
     est = se.estimate_record(run, SETUP)
-    assert est.converged and est.iterations <= 6
+    assert est.converged and est.passes <= 6
     z = (est.values - TRUTH) / est.sigma
     assert np.all(np.abs(z) < 3.0), z
     assert np.all(np.abs(est.observable - TRUTH[:4]) < 0.01 * np.abs(TRUTH[:4]))
