@@ -33,6 +33,7 @@ UNITS = {
     "": 1.0, "rad": 1.0, "deg": math.pi / 180.0, "arcmin": math.pi / (180.0 * 60.0),
     "arcsec": ARCSEC, "mrad": 1e-3, "deg_per_h": math.pi / (180.0 * 3600.0),
     "g": 9.80665, "m": 1.0, "s": 1.0, "hz": 1.0, "px": 1.0, "deg_per_s": math.pi / 180.0,
+    "deg_per_root_h": math.pi / (180.0 * 60.0),
 }
 """Scale from a study-file unit to SI/radians."""
 
@@ -78,8 +79,8 @@ class ParamSystem:
         fields: dict[str, Any] = {}
         for param, default in self._module().DEFAULT_PARAMS.items():
             scale = UNITS[self.units.get(param, "")]
-            value = default / scale if isinstance(default, float) else default
-            kind = type(default) if not isinstance(default, bool) else bool
+            value = float(default) / scale if isinstance(default, float) else default
+            kind = float if isinstance(default, float) else type(default)
             fields[self._key(param)] = (kind, value)
         params = create_model(f"{self.name}_params", __base__=Strict, **fields)
         return create_model(f"{self.name}_config", __base__=Strict, params=(params, params()))
@@ -163,3 +164,27 @@ COLLIMATION = ParamSystem(
     default_block_size=64,
 )
 """Seed 003: autocollimator-INS axis calibration (montecarlo.collimation)."""
+
+STABILIZATION = ParamSystem(
+    name="stabilization",
+    module="montecarlo.stabilization_estimation",
+    units={"duration": "s", "rate": "hz", "misalignment_min": "deg", "misalignment_max": "deg",
+           "rock_amplitude": "deg", "rock_freq_yaw": "hz", "rock_freq_pitch": "hz",
+           "rock_freq_roll": "hz", "aim_azimuth": "deg", "aim_pitch": "deg", "image_noise": "px",
+           "gyro_noise": "deg_per_root_h", "gyro_bias": "deg_per_h", "fov": "deg"},
+    metrics_=(
+        *_angles(("dpx_error", "dgx_error", "dgy_error", "dz_error"), "estimation error",
+                 "arcmin", signed=True),
+        *(Metric(f"{q}_rel_error", f"|error| / |truth| of {q}", "1", 1.0)
+          for q in ("dpx", "dgx", "dgy", "dz")),
+        *_angles(("dpx_sigma", "dgx_sigma", "dgy_sigma", "dz_sigma"), "predicted σ", "arcmin"),
+        Metric("within_2sigma", "all four within 2σ (mean = rate)", "1", 1.0),
+        Metric("within_5pct", "all four within 5 % (mean = rate)", "1", 1.0),
+        Metric("accepted", "all four within 2σ and 5 % (mean = rate)", "1", 1.0),
+        *_angles(("los_rms_before", "los_rms_after"), "line-of-sight error RMS", "arcmin"),
+        Metric("los_rms_ratio", "LOS error RMS after / before compensation", "1", 1.0),
+        Metric("residual_rms", "image residual RMS", "px", 1.0),
+    ),
+    default_block_size=32,
+)
+"""Seed 001: gyro indirect stabilisation installation angles (montecarlo.stabilization)."""

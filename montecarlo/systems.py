@@ -66,6 +66,7 @@ _REGISTRY = {
     "ground": "montecarlo.ground_study:GroundSystem",
     "air": "montecarlo.param_systems:AIR",
     "collimation": "montecarlo.param_systems:COLLIMATION",
+    "stabilization": "montecarlo.param_systems:STABILIZATION",
 }
 SYSTEM_NAMES = tuple(_REGISTRY)
 
