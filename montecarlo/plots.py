@@ -28,8 +28,8 @@ KEY_LABELS = {
     "errors.evaluation": ("", "evaluation"),
 }
 MAX_LINES = 12
-UNIT_SUFFIXES = ("deg_per_h", "deg_per_s", "arcsec", "arcmin", "mrad", "deg", "px", "hz", "m",
-                 "s", "g")
+UNIT_SUFFIXES = ("deg_per_root_h", "deg_per_h", "deg_per_s", "arcsec", "arcmin", "mrad", "deg",
+                 "px", "hz", "m", "s", "g")
 DIST_FIELDS = ("bound", "sigma", "value", "center", "mean")
 
 
@@ -70,6 +70,21 @@ def _zip_partners(study: Study) -> dict[str, tuple[str, ...]]:
         for k in keys:
             partners[k] = keys if mode == "zip" else (k,)
     return partners
+
+
+def _at_base_except(study: Study, data: pd.DataFrame, key: str) -> pd.DataFrame:
+    """Rows where the other keys of ``key``'s one_at_a_time group are at their base values."""
+    base = study.points[0].values  # point 0 is the base of every one_at_a_time group
+    for mode, keys in study.sweep_groups:
+        if mode == "one_at_a_time" and key in keys:
+            for other in keys:
+                if other != key:
+                    data = data[data[other] == base[other]]
+    return data
+
+
+def _oat_keys(study: Study) -> set[str]:
+    return {k for mode, keys in study.sweep_groups if mode == "one_at_a_time" for k in keys}
 
 
 def _fmt(v: Any) -> str:
@@ -121,7 +136,8 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         group = list(partners[key])
         if group[0] != key or (len(group) == 1 and _is_categorical(data, key)):
             continue  # zipped keys share their group's figure; categories become panels
-        rest = [k for k in study.sweep_keys if k not in group]
+        oat = _oat_keys(study)
+        rest = [k for k in study.sweep_keys if k not in group and k not in oat]
         row_keys = [k for k in rest if _is_categorical(data, k)]
         line_keys = [k for k in rest if k not in row_keys]
         # a zipped group moves together: its first key names the line
@@ -129,14 +145,17 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         rows, _ = _combos(data, row_keys, 4)
         lines, thinned = _combos(data, line_keys, MAX_LINES)
         few = len(lines) <= 3
-        xs = data[group].drop_duplicates().reset_index(drop=True)
+        data_k = _at_base_except(study, data, key)
+        xs = data_k[group].drop_duplicates().reset_index(drop=True)
         numeric = len(group) == 1
+        if numeric:
+            xs = xs.sort_values(key).reset_index(drop=True)
         fig = Figure(figsize=(max(6.5, 5.0 * len(variants)), 3.6 * len(rows) + 0.8),
                      layout="constrained")
         axes = fig.subplots(len(rows), len(variants), squeeze=False, sharex=True, sharey=True)
         for (r, row), (c, variant) in itertools.product(enumerate(rows), enumerate(variants)):
             ax = axes[r, c]
-            panel = _select(data[data["variant"] == variant], row_keys, row)
+            panel = _select(data_k[data_k["variant"] == variant], row_keys, row)
             for i, line in enumerate(lines):
                 sel = _select(panel, line_keys, line).merge(xs.reset_index(), on=group)
                 sel = sel.sort_values(key if numeric else "index")
@@ -145,8 +164,12 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
                 label = ", ".join(short_label(k, v) for k, v in zip(line_keys, line,
                                                                      strict=True)
                                   if k in named) or None
-                ax.plot(x, sel["p50"], "-o", color=color, ms=3, label=label)
-                if few:
+                ax.plot(x, sel["p50"], "-o" if numeric else "o", color=color, ms=3, label=label)
+                if not numeric:  # separate cases (zipped rows): no lines between them
+                    ax.vlines(x, sel["p50"], sel["p95"], color=color, alpha=0.5)
+                    ax.plot(x, sel["p95"], "_", color=color, ms=10)
+                    ax.plot(x, sel["max"], "x", color=color, ms=5)
+                elif few:
                     ax.fill_between(x, sel["p50"], sel["p95"], color=color, alpha=0.2, lw=0)
                     ax.plot(x, sel["p99"], ":", color=color, lw=1)
                     ax.plot(x, sel["max"], "x", color=color, ms=5)
@@ -178,7 +201,7 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         else:
             ax0.set_xticks(xs.index, ["\n".join(_fmt(v) for v in row)
                                       for row in xs.itertuples(index=False)], fontsize=7)
-        shown = data[data["variant"].isin(variants)]
+        shown = data_k[data_k["variant"].isin(variants)]
         lo, hi = np.nanmin(shown["p50"]), np.nanmax(shown["p99" if few else "p95"])
         if lo > 0 and hi / lo > 30:
             ax0.set_yscale("log")
@@ -192,7 +215,8 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
             ax0.legend(fontsize=6, loc="best", ncols=2 if n_labels > 6 else 1,
                        title="; ".join(notes) or None, title_fontsize=6)
         ci = f"{study.header.confidence:.0%}"
-        style = ("line p50, band to p95, dotted p99, × max" if few
+        style = ("cases: dot p50, bar to p95 (—), × max" if not numeric
+                 else "line p50, band to p95, dotted p99, × max" if few
                  else "solid p50, dashed p95")
         fig.suptitle(f"{study.header.name}: {m.label}\n{style}; bars: {ci} CI of p95",
                      fontsize=9)
@@ -228,7 +252,7 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
             ax.stairs(h / counts.sum(), edges, color=f"C{i}", label=v, fill=i == 0,
                       alpha=0.35 if i == 0 else 1.0)
         gp = study.points[p]
-        ax.set_title(", ".join(short_label(k, v) for k, v in gp.overrides.items())
+        ax.set_title(", ".join(short_label(k, v) for k, v in gp.values.items())
                      or f"point {p}", fontsize=7)
         ax.tick_params(labelsize=7)
     for ax in axes[len(points):]:
@@ -247,7 +271,8 @@ def lh_map_figure(result: StudyResult, summary: pd.DataFrame) -> Figure | None:
     keys = study.sweep_keys
     partners = _zip_partners(study)
     L, H = "geometry.L_m", "geometry.H_m"
-    if L not in keys or H not in keys or partners[L] != (L,) or partners[H] != (H,):
+    if L not in keys or H not in keys or partners[L] != (L,) or partners[H] != (H,) \
+            or {L, H} & _oat_keys(study):
         return None
     metric = plot_metric(study)
     m = study.metric(metric)

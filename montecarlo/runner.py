@@ -67,7 +67,7 @@ class StudyResult:
 
     def _sweep_value(self, key: str, value: Any) -> Any:
         """Sweep values as they go in a column: text if the key mixes numbers and text."""
-        kinds = {isinstance(p.overrides[key], str) for p in self.study.points}
+        kinds = {isinstance(p.values[key], str) for p in self.study.points}
         return str(value) if len(kinds) > 1 else value
 
     def to_frame(self) -> pd.DataFrame:
@@ -79,7 +79,7 @@ class StudyResult:
             df[VALUE_COLUMNS] = df[VALUE_COLUMNS].mul(scale, axis=0)
             df.insert(0, "point", gp.index)
             for i, key in enumerate(self.study.sweep_keys):
-                df.insert(1 + i, key, self._sweep_value(key, gp.overrides[key]))
+                df.insert(1 + i, key, self._sweep_value(key, gp.values[key]))
             df.insert(len(self.study.sweep_keys) + 3, "unit",
                       df["metric"].map({m.name: m.unit for _, m in self.study.metrics}))
             frames.append(df)

@@ -14,10 +14,13 @@ Layout of a study file::
 
     ... the system's own sections (e.g. [sensor], [geometry], [errors] for "ground") ...
 
-    [[sweep]]                    # optional, repeatable: each group is "product" (default) or
-    mode = "zip"                 # "zip"; groups combine with each other as a product
+    [[sweep]]                    # optional, repeatable: each group is "product" (default),
+    mode = "zip"                 # "zip" or "one_at_a_time"; groups combine as a product
     "geometry.L_m" = [50, 100]
     "geometry.H_m" = [1, 2]
+
+A "one_at_a_time" group varies each of its keys alone while the others keep the value the file
+gives them (the base point, which is also run).
 
 Every mistake raises :class:`InputError` with one line naming the file, the key and the value.
 """
@@ -77,6 +80,8 @@ class GridPoint:
 
     index: int
     overrides: dict[str, Any]
+    values: dict[str, Any]
+    """The value of every sweep key at this point (overridden or the file's base value)."""
     config: Any
     prepared: Any
     trials: int
@@ -109,7 +114,7 @@ class Study:
             "study": self.header.model_dump(mode="json"),
             "spec": None if self.spec is None else self.spec.model_dump(mode="json"),
             "block_size": self.block_size,
-            "points": [{"overrides": p.overrides, "trials": p.trials,
+            "points": [{"values": p.values, "trials": p.trials,
                         "config": p.config.model_dump(mode="json")} for p in self.points],
         }
 
@@ -154,8 +159,9 @@ def _parse_sweep(path: Path, raw: Any) -> list[tuple[str, dict[str, list[Any]]]]
             raise InputError(f"{path}: {where}: must be a table of key = [values]")
         group = dict(group)
         mode = group.pop("mode", "product")
-        if mode not in ("product", "zip"):
-            raise InputError(f"{path}: {where}.mode: must be 'product' or 'zip' (got {mode!r})")
+        if mode not in SWEEP_MODES:
+            raise InputError(f"{path}: {where}.mode: must be one of {', '.join(SWEEP_MODES)} "
+                             f"(got {mode!r})")
         if not group:
             raise InputError(f"{path}: {where}: no keys to sweep")
         for key, values in group.items():
@@ -175,11 +181,28 @@ def _expand(groups: list[tuple[str, dict[str, list[Any]]]]) -> list[dict[str, An
     per_group = []
     for mode, group in groups:
         keys = list(group)
+        if mode == "one_at_a_time":
+            per_group.append([{}] + [{k: v} for k, values in group.items() for v in values])
+            continue
         combos = zip(*group.values(), strict=True) if mode == "zip" \
             else itertools.product(*group.values())
         per_group.append([dict(zip(keys, c, strict=True)) for c in combos])
     return [{k: v for part in combo for k, v in part.items()}
             for combo in itertools.product(*per_group)] if per_group else [{}]
+
+
+SWEEP_MODES = ("product", "zip", "one_at_a_time")
+
+
+def _lookup(path: Path, raw: dict[str, Any], key: str) -> Any:
+    """The value at a dotted key of a study dict (the base of a one_at_a_time sweep)."""
+    node: Any = raw
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise InputError(f"{path}: sweep key '{key}': a one_at_a_time sweep needs its base "
+                             f"value in the file")
+        node = node[part]
+    return node
 
 
 def _apply(path: Path, raw: dict[str, Any], key: str, value: Any) -> None:
@@ -251,7 +274,9 @@ def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
         except ValidationError as err:
             raise InputError(_validation_message(path, err, (), where)) from None
         prepared = system.prepare(config)
-        points.append(GridPoint(i, overrides, config, prepared,
+        values = {k: overrides[k] if k in overrides else _lookup(path, point_raw, k)
+                  for k in sweep_keys}
+        points.append(GridPoint(i, overrides, values, config, prepared,
                                 system.trials_per_point(prepared, header.trials)))
 
     metrics = tuple(dict.fromkeys(m for p in points for m in system.metrics(p.prepared)))

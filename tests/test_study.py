@@ -71,6 +71,23 @@ def test_zip_and_product_expand(tmp_path):
     assert study.hash() != load_study(p, seed=2).hash()
 
 
+def test_one_at_a_time_varies_each_key_around_the_base(tmp_path):
+    p = write(tmp_path, BASE + """
+    [[sweep]]
+    mode = "one_at_a_time"
+    "geometry.L_m" = [25.0, 100.0]
+    "errors.pixel_px.sigma" = [0.1]
+
+    [[sweep]]
+    "errors.pixel_relation" = ["common", "independent"]
+    """)
+    study = load_study(p)
+    assert len(study.points) == (1 + 2 + 1) * 2
+    values = [(q.values["geometry.L_m"], q.values["errors.pixel_px.sigma"])
+              for q in study.points[::2]]
+    assert values == [(50.0, 0.5), (25.0, 0.5), (100.0, 0.5), (50.0, 0.1)]
+
+
 MISTAKES = [
     ("unknown key", BASE.replace("L_m = 50.0", "L_mm = 50.0"), ["geometry.L_mm", "unknown key"]),
     ("wrong type", BASE.replace("L_m = 50.0", 'L_m = "fifty"'), ["geometry.L_m", "'fifty'"]),
@@ -101,6 +118,10 @@ MISTAKES = [
     ("unknown spec metric", BASE + '[spec]\nmetric = "nope"\nlimit = 3.0\n',
      ["spec.metric", "nope"]),
     ("negative trials", BASE.replace("trials = 100", "trials = -3"), ["study.trials", "-3"]),
+    ("one_at_a_time without base", BASE + '[[sweep]]\nmode = "one_at_a_time"\n'
+     '"errors.dx_m.bound" = [0.1]\n', ["errors.dx_m.bound", "base value"]),
+    ("unknown sweep mode", BASE + '[[sweep]]\nmode = "random"\n"geometry.L_m" = [1.0]\n',
+     ["sweep[0].mode", "'random'"]),
 ]
 
 
