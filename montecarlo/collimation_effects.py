@@ -34,12 +34,15 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from montecarlo import collimation as col
 from montecarlo import discrepancy as dia
+from montecarlo.discrepancy_report import SystemView
+from montecarlo.exceptions import InputError
 from montecarlo.param_systems import ParamSystem
 from montecarlo.systems import Metric
 
@@ -69,7 +72,8 @@ CANDIDATE_NAMES = tuple(c.name for c in CANDIDATES)
 
 DISPLAY_UNITS = {
     **dict.fromkeys(("axis_az", "axis_el", "frame_tilt_x", "frame_tilt_y", "ins_heading_bias",
-                     "ins_pitch_bias", "theodolite_c", "frame_heading"), ("arcsec", ARCSEC)),
+                     "ins_pitch_bias", "theodolite_c"), ("arcsec", ARCSEC)),
+    "frame_heading": ("deg", math.pi / 180.0),
     **dict.fromkeys(("ins_heading_scale", "ins_pitch_scale"), ("ppm", 1e-6)),
 }
 """Parameter -> (unit shown in reports and JSON, its size in SI/radians)."""
@@ -189,17 +193,34 @@ def min_mirrors() -> int:
     return math.ceil((1 + 2 + 1) / 2)
 
 
+def read_mirror_csv(path: str | Path) -> MirrorData:
+    """Read a collimation CSV (:func:`montecarlo.collimation.read_readings`) for a diagnosis.
+
+    Raises
+    ------
+    InputError
+        As ``read_readings``, or fewer than :func:`min_mirrors` rows.
+    """
+    data = MirrorData.from_readings(col.read_readings(path, effects=()))
+    if len(data.mirror) < min_mirrors():
+        raise InputError(f"{path}: {len(data.mirror)} data rows, at least {min_mirrors()} "
+                         "needed (frame heading + up to 2 parameters of an effect + 1 degree "
+                         "of freedom, 2 readings per mirror)")
+    return data
+
+
 def simulate(layout: MirrorData, truth: Mapping[str, float], noise: col.Noise,
              rng: int | np.random.Generator | None = None) -> MirrorData:
     """Measured-like readings of the layout's mirrors (true normals) under ``truth``.
 
     The theodolite reads each normal with its collimation and noise; the INS, at true roll
-    ``N(0, mount_roll)``, reports :func:`predict_readings` of the true normals plus noise (its
-    scale reference the mean true heading); the reported roll carries ``noise.ins_roll``.
+    ``layout roll + N(0, mount_roll)``, reports :func:`predict_readings` of the true normals
+    plus noise (its scale reference the mean true heading); the reported roll carries
+    ``noise.ins_roll``.
     """
     rng = np.random.default_rng(rng)
     m = layout.theodolite_az.size
-    roll = noise.mount_roll * rng.standard_normal(m)
+    roll = layout.roll + noise.mount_roll * rng.standard_normal(m)
     true = MirrorData(layout.mirror, layout.sets, layout.theodolite_az, layout.theodolite_el,
                       layout.ins_az, layout.ins_el, roll)
     geometric = {k: v for k, v in truth.items() if k in _COL_PARAMS}
@@ -296,6 +317,25 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         lambda data, fit: float(np.sqrt(np.mean(raw_residuals(data, fit.params) ** 2))),
         truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
         watched=("theodolite_collimation",))
+
+
+def report_view(data: MirrorData, angle_sigma: float) -> SystemView:
+    """How reports show a collimation diagnosis: units, residual axes, Monte Carlo params."""
+    axes = [("theodolite elevation [deg]", np.degrees(data.theodolite_el), None),
+            ("theodolite azimuth [deg]", np.degrees(data.theodolite_az), None),
+            ("mirror (file order)", np.arange(data.theodolite_az.size, dtype=float), None)]
+    layout = json.dumps(data.layout())
+
+    def study_params(fit: dia.ModelFit) -> dict[str, object]:
+        values = fit.params
+        return {"layout": layout, "theodolite_sigma": angle_sigma / math.sqrt(2.0),
+                "ins_sigma": angle_sigma / math.sqrt(2.0), "mount_roll_sigma": 0.0,
+                **{k: float(values.get(k, 0.0)) for k in ("frame_heading", *_TRUTH_KEYS)},
+                "fit_effects": ",".join(fit.effects[1:]), "diagnose": 0}
+
+    return SystemView("collimation", display_unit, "arcsec", ARCSEC, ("heading", "pitch"),
+                      lambda params: raw_residuals(data, params), axes, STUDY_SYSTEM,
+                      study_params)
 
 
 STUDY_SYSTEM = ParamSystem(

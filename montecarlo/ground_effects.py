@@ -47,6 +47,7 @@ from scipy.spatial.transform import Rotation
 from montecarlo import discrepancy as dia
 from montecarlo.camera import Camera, direction_from_pixels, pixels_from_direction
 from montecarlo.csvio import read_table
+from montecarlo.discrepancy_report import SystemView
 from montecarlo.exceptions import InputError
 from montecarlo.param_systems import ParamSystem
 from montecarlo.rotations import euler_zxy_from_matrix, mounting_matrix
@@ -105,7 +106,8 @@ DISPLAY_UNITS = {
     **dict.fromkeys(("k1", "p1", "p2", "s", "a", "s_h", "k", "c"), ("1", 1.0)),
     **dict.fromkeys(("c_x", "c_z"), ("px", 1.0)),
     **dict.fromkeys(("b_x", "b_y", "b_z", "l_x", "l_y", "l_z"), ("m", 1.0)),
-    **dict.fromkeys(("rho", "psi", "theta", "gamma"), ("mrad", MRAD)),
+    **dict.fromkeys(("psi", "theta", "gamma"), ("deg", math.pi / 180.0)),
+    "rho": ("mrad", MRAD),
     **dict.fromkeys(("w_psi", "w_theta", "w_gamma"), ("mrad/h", MRAD_PER_H)),
 }
 """Parameter -> (unit shown in reports and JSON, its size in SI/radians)."""
@@ -189,7 +191,11 @@ def read_ground_csv(path: str | Path, camera: Camera) -> GroundData:
         the detector; one line naming file, row and column.
     """
     table = read_table(path, ["x_m", "y_m", "z_m", "px", "pz"], optional_numeric=["t_s"],
-                       text=["target"], min_rows=min_targets())
+                       text=["target"])
+    if len(table) < min_targets():
+        raise InputError(f"{path}: {len(table)} data rows, at least {min_targets()} needed (3 "
+                         "mounting angles + up to 3 parameters of an effect + 1 degree of "
+                         "freedom, 2 image coordinates per row)")
     session = None
     if "session" in table.columns:
         values = table["session"].str.strip()
@@ -444,6 +450,7 @@ DEFAULT_PARAMS: dict[str, float | int | str] = {
     **DEFAULT_MOUNTING,
     **dict.fromkeys(_TRUTH_KEYS, 0.0),
     "c": 1.0, "k": STANDARD_REFRACTION,
+    "extra_truth": "",
     "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": dia.ALPHA,
 }
 """Defaults of :func:`run_trials` (SI units, radians); see its docstring."""
@@ -473,6 +480,7 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         [px], ``c_z`` [px], ``s``, ``a``, ``rho`` [rad], ``s_h``, ``b_x``, ``b_y``, ``b_z``,
         ``l_x``, ``l_y``, ``l_z`` [m], ``k``, ``c``, ``w_psi``, ``w_theta``, ``w_gamma``
         [rad/s]): its true value (0, except the physical ``c`` = 1 and ``k`` = 0.13).
+        ``extra_truth`` [JSON text]: further true parameters, e.g. session shifts [rad].
         ``fit_effects`` [text]: comma-separated effects fitted for ``chi2`` .. ``rms`` ("":
         the base model). ``diagnose`` [0/1]: also run the whole DIA diagnosis. ``expected``
         [text]: the effect injected, for scoring. ``inject_mdb`` [1]: if > 0, ``expected`` is
@@ -501,6 +509,8 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
     camera = Camera(float(p["fov_yaw"]), float(p["fov_pitch"]), float(p["n_x"]),
                     float(p["n_z"]))
     truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", *_TRUTH_KEYS)}
+    if p["extra_truth"]:
+        truth.update({k: float(v) for k, v in json.loads(str(p["extra_truth"])).items()})
     layout = (default_layout(camera, truth) if not p["layout"]
               else layout_from_json(str(p["layout"])))
     sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
@@ -520,6 +530,43 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         lambda data, fit: float(np.sqrt(np.mean(raw_residuals(data, camera, fit.params) ** 2))),
         truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
         watched=("refraction", "earth_curvature"))
+
+
+def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sigma: float
+                ) -> SystemView:
+    """How reports show a ground diagnosis: units, residual axes, Monte Carlo study params."""
+    tangent = data.pixels / np.array([camera.k_x, camera.k_z])
+    radius = np.hypot(tangent[:, 0], tangent[:, 1])
+    outward = tangent / np.where(radius > 0, radius, 1.0)[:, None]
+
+    def radial(res: FloatArray) -> FloatArray:
+        """Residuals along and across the image radius [px]."""
+        along = np.sum(res * outward, axis=1)
+        across = res[:, 1] * outward[:, 0] - res[:, 0] * outward[:, 1]
+        return np.stack([along, across], axis=1)
+
+    axes = [("image radius (tangent plane) [1]", radius, (("radial", "tangential"), radial)),
+            ("range [m]", np.linalg.norm(data.positions, axis=1), None),
+            ("target height z [m]", data.positions[:, 2], None)]
+    if data.t is not None:
+        axes.append(("time t_s [s]", data.t, None))
+    layout = json.dumps(data.layout())
+    shifts = [q for c in candidates_for(data)[0] if c.name == "session_shift"
+              for q in c.parameters]
+
+    def study_params(fit: dia.ModelFit) -> dict[str, object]:
+        values = fit.params
+        return {"fov_yaw": float(camera.fov_yaw), "fov_pitch": float(camera.fov_pitch),
+                "n_x": int(camera.n_x), "n_z": int(camera.n_z), "pixel_sigma": pixel_sigma,
+                "survey_sigma": survey_sigma, "layout": layout,
+                **{k: float(values.get(k, 0.0)) for k in ("psi", "theta", "gamma",
+                                                          *_TRUTH_KEYS)},
+                "extra_truth": json.dumps({q: values[q] for q in shifts if q in values}),
+                "fit_effects": ",".join(fit.effects[1:]), "diagnose": 0}
+
+    return SystemView("ground", display_unit, "px", 1.0, ("px", "pz"),
+                      lambda params: raw_residuals(data, camera, params), axes, STUDY_SYSTEM,
+                      study_params)
 
 
 STUDY_SYSTEM = ParamSystem(

@@ -66,6 +66,8 @@ _REGISTRY = {
     "ground": "montecarlo.ground_study:GroundSystem",
     "air": "montecarlo.param_systems:AIR",
     "collimation": "montecarlo.param_systems:COLLIMATION",
+    "discrepancy_ground": "montecarlo.ground_effects:STUDY_SYSTEM",
+    "discrepancy_collimation": "montecarlo.collimation_effects:STUDY_SYSTEM",
 }
 SYSTEM_NAMES = tuple(_REGISTRY)
 
