@@ -305,8 +305,10 @@ def log_chi2_sf(x: float, dof: int) -> float:
     with ``a = dof/2``, ``y = x/2`` (relative error below 1e-6 there).
     """
     value = float(stats.chi2.logsf(x, dof))
-    if np.isfinite(value):
-        return value
+    return value if np.isfinite(value) else _log_chi2_sf_asymptotic(x, dof)
+
+
+def _log_chi2_sf_asymptotic(x: float, dof: int) -> float:
     a, y = dof / 2.0, x / 2.0
     series = 1.0 + (a - 1.0) / y + (a - 1.0) * (a - 2.0) / y**2
     return (a - 1.0) * math.log(y) - y + math.log(series) - math.lgamma(a)

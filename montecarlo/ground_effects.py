@@ -208,8 +208,8 @@ def read_ground_csv(path: str | Path, camera: Camera) -> GroundData:
         bad = np.flatnonzero(np.abs(values) > half)
         if bad.size:
             i = int(bad[0])
-            raise InputError(f"{path}: row {i + 2}, column '{column}': {values[i]!r} is outside "
-                             f"the detector (|{column}| <= {half:g} px)")
+            raise InputError(f"{path}: row {i + 2}, column '{column}': {float(values[i])!r} "
+                             f"is outside the detector (|{column}| <= {half:g} px)")
     positions = table[["x_m", "y_m", "z_m"]].to_numpy(float)
     zero = np.flatnonzero(np.linalg.norm(positions, axis=1) == 0.0)
     if zero.size:
