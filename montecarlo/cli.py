@@ -278,6 +278,10 @@ def _add_collimation_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_collimation_figures)
 
 
+def _unit(unit: str) -> str:
+    return "" if unit == "1" else f" {unit}"
+
+
 def _diagnosis_output(args: argparse.Namespace, d, view, source: str) -> int:
     from montecarlo import discrepancy_report as rep
 
@@ -364,7 +368,7 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
              if k not in ("psi", "theta", "gamma") and v != 0.0}
     print(f"wrote {args.out}: {data.n} observations ({dropped} off the detector dropped), "
           f"seed {args.seed}; injected: "
-          + (", ".join(f"{k} = {v:.4g} {ge.display_unit(k)[0]}" for k, v in shown.items())
+          + (", ".join(f"{k} = {v:.4g}{_unit(ge.display_unit(k)[0])}" for k, v in shown.items())
              or "nothing"))
     return 0
 
@@ -395,7 +399,7 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
              if k != "frame_heading" and v != 0.0}
     print(f"wrote {args.out}: {len(data.mirror)} mirrors, seed {args.seed}; diagnose with "
           f"--angle-sigma-arcsec {sigma:.4g}; injected: "
-          + (", ".join(f"{k} = {v:.4g} {ce.display_unit(k)[0]}" for k, v in shown.items())
+          + (", ".join(f"{k} = {v:.4g}{_unit(ce.display_unit(k)[0])}" for k, v in shown.items())
              or "nothing"))
     return 0
 

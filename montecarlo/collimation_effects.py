@@ -335,7 +335,8 @@ def report_view(data: MirrorData, angle_sigma: float) -> SystemView:
 
     return SystemView("collimation", display_unit, "arcsec", ARCSEC, ("heading", "pitch"),
                       lambda params: raw_residuals(data, params), axes, STUDY_SYSTEM,
-                      study_params)
+                      study_params, lambda name: ("arcsec", ARCSEC) if name == "frame_heading"
+                      else display_unit(name))
 
 
 STUDY_SYSTEM = ParamSystem(

@@ -331,6 +331,9 @@ class CandidateTest:
     p_adjusted : Holm-adjusted p-value over the family (NaN outside the family).
     estimate, stderr : linearised size of the active parameters and its 1-sigma.
     mdb : active parameter -> minimal detectable bias (alone, others zero).
+    influence : model parameter -> largest shift of its estimate caused by one of the
+        candidate's parameters left out at its MDB (Baarda's external reliability: how much an
+        effect the test cannot see may bias the fitted model).
     lambda0 : noncentrality at which the chain detects and identifies it with ``power``.
     lambda_bounds : upper bound of the noncentrality inside its physical bounds.
     reason : text for statuses other than testable.
@@ -349,6 +352,7 @@ class CandidateTest:
     estimate: dict[str, float] = field(default_factory=dict)
     stderr: dict[str, float] = field(default_factory=dict)
     mdb: dict[str, float] = field(default_factory=dict)
+    influence: dict[str, float] = field(default_factory=dict)
     lambda0: float = math.nan
     lambda_bounds: float = math.nan
     reason: str = ""
@@ -392,7 +396,7 @@ def analyse_candidates(problem: Problem, fit: ModelFit, alpha: float = ALPHA,
     G_all = jacobian(problem, values, all_params) if all_params else np.zeros((r.size, 0))
 
     tests: dict[str, CandidateTest] = {}
-    work: list[tuple[Effect, list[int], FloatArray, dict, dict]] = []
+    work: list[tuple[Effect, list[int], FloatArray, FloatArray, dict, dict]] = []
     offset = 0
     for c in problem.candidates:
         if c.name in fit.effects:
@@ -436,12 +440,12 @@ def analyse_candidates(problem: Problem, fit: ModelFit, alpha: float = ALPHA,
                                           reason="absorbed by " + ", ".join(sorted(
                                               {n for v in absorbed_by.values() for n in v})))
         else:
-            work.append((c, active, Gbar, retained, absorbed_by))
+            work.append((c, active, G, Gbar, retained, absorbed_by))
 
     m = len(work)
     lam_global = noncentrality(alpha, fit.dof, power) if fit.dof > 0 else math.inf
     log_ps = []
-    for c, active, Gbar, retained, absorbed_by in work:
+    for c, active, G, Gbar, retained, absorbed_by in work:
         Ga = Gbar[:, active]
         names = tuple(c.parameters[j] for j in active)
         N = Ga.T @ Ga
@@ -451,6 +455,8 @@ def analyse_candidates(problem: Problem, fit: ModelFit, alpha: float = ALPHA,
         q = len(active)
         lam0 = max(lam_global, noncentrality(alpha / m, q, power))
         mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
+        shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
+        influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))
         reach = sum(max(abs(c.bounds[j][0]), abs(c.bounds[j][1])) * math.sqrt(N[k, k])
                     for k, j in enumerate(active)) ** 2
         log_p = log_chi2_sf(T, q)
@@ -462,8 +468,8 @@ def analyse_candidates(problem: Problem, fit: ModelFit, alpha: float = ALPHA,
         tests[c.name] = CandidateTest(
             c.name, status, names, retained, absorbed_by, T, q, float(np.exp(log_p)), log_p,
             math.nan, dict(zip(names, est.tolist(), strict=True)),
-            dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, lam0, reach,
-            reason, _orthonormal(Ga), Ga)
+            dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
+            lam0, reach, reason, _orthonormal(Ga), Ga)
         log_ps.append(log_p)
     if work:
         adjusted = holm(np.exp(log_ps))

@@ -40,6 +40,7 @@ class SystemView:
         ``components`` is None for the two raw components, or (names, transform) turning the
         (m, 2) residuals into two other components (e.g. radial and tangential).
     study : the study system and a function giving its ``[params]`` (SI) for a fit.
+    shift_unit : parameter -> (unit, size in SI) for small changes of it (influences).
     """
 
     system: str
@@ -51,6 +52,10 @@ class SystemView:
     axes: Sequence[tuple[str, FloatArray, tuple[tuple[str, str], Callable] | None]]
     study: ParamSystem
     study_params: Callable[[dia.ModelFit], dict[str, Any]]
+    shift_unit: Callable[[str], tuple[str, float]] | None = None
+
+    def small(self, name: str) -> tuple[str, float]:
+        return (self.shift_unit or self.display_unit)(name)
 
 
 def _rms(view: SystemView, fit: dia.ModelFit) -> float:
@@ -94,6 +99,8 @@ def to_json(d: dia.Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         return {"name": t.name, "status": t.status, "statistic": t.statistic, "dof": t.dof,
                 "p_value": t.p_value, "p_adjusted": t.p_adjusted,
                 "mdb": _show(view, t.mdb), "units": {k: view.display_unit(k)[0] for k in t.mdb},
+                "influence": {k: v / view.small(k)[1] for k, v in t.influence.items()},
+                "influence_units": {k: view.small(k)[0] for k in t.influence},
                 "retained": t.retained, "absorbed_by": t.absorbed_by, "reason": t.reason}
 
     return {
@@ -112,6 +119,7 @@ def to_json(d: dia.Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "model_before": _model(view, d.before),
         "model_after": _model(view, d.after),
         "candidates": [candidate(t) for t in d.steps[0].tests],
+        "candidates_after": [candidate(t) for t in d.steps[-1].tests],
         "steps": [{"model": list(s.fit.effects), "chi2_red": s.fit.chi2_red,
                    "p_value": s.fit.p_value, "winner": s.winner, "group": list(s.group)}
                   for s in d.steps],
@@ -159,6 +167,16 @@ def format_text(report: Mapping[str, Any]) -> str:
         p = f"{c['p_adjusted']:9.3g}" if math.isfinite(c["p_adjusted"]) else f"{'-':>9}"
         lines.append(f"{c['name']:<24} {c['status']:<12} {stat} {c['dof']:>3} {p}  "
                      f"{mdb or c['reason']}")
+    lines.append("")
+    lines.append("what the final model could still miss: MDB of each candidate and the largest "
+                 "shift it would cause, undetected at its MDB, in the fitted parameters")
+    for c in report["candidates_after"]:
+        if c["status"] not in ("testable", "undetectable"):
+            continue
+        mdb = ", ".join(f"{k} {v:.3g}{_unit(c['units'][k])}" for k, v in c["mdb"].items())
+        worst = sorted(c["influence"].items(), key=lambda kv: -abs(kv[1]))[:3]
+        shift = ", ".join(f"{k} {v:.3g}{_unit(c['influence_units'][k])}" for k, v in worst)
+        lines.append(f"  {c['name']:<24} MDB {mdb}; shifts {shift}")
     return "\n".join(lines)
 
 

@@ -118,6 +118,11 @@ def display_unit(name: str) -> tuple[str, float]:
     return DISPLAY_UNITS.get(name, ("mrad", MRAD))
 
 
+def shift_unit(name: str) -> tuple[str, float]:
+    """Unit of small changes of a parameter (mounting angles in mrad)."""
+    return ("mrad", MRAD) if name in BASE.parameters else display_unit(name)
+
+
 # --------------------------------------------------------------------------- data
 
 
@@ -566,7 +571,7 @@ def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sig
 
     return SystemView("ground", display_unit, "px", 1.0, ("px", "pz"),
                       lambda params: raw_residuals(data, camera, params), axes, STUDY_SYSTEM,
-                      study_params)
+                      study_params, shift_unit)
 
 
 STUDY_SYSTEM = ParamSystem(

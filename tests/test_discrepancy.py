@@ -208,3 +208,24 @@ def test_chi2_red_band():
     lo, hi = dia.chi2_red_band(50)
     assert stats.chi2.cdf(50 * lo, 50) == pytest.approx(0.005)
     assert stats.chi2.cdf(50 * hi, 50) == pytest.approx(0.995)
+
+
+def test_influence_is_the_shift_an_undetected_bias_causes():
+    """External reliability: noise-free data with the cubic at its MDB, fitted by the line
+    alone, move (a, b) by exactly the reported influence."""
+    problem = toy_problem(np.zeros_like(X))
+    fit = dia.fit_model(problem, ())
+    t = next(t for t in dia.analyse_candidates(problem, fit) if t.name == "cubic")
+    y = 0.3 + 0.5 * X + t.mdb["c_cubic"] * X**3
+    _, coef = chi2_of([np.ones_like(X), X], y)
+    assert t.influence["b"] == pytest.approx(abs(coef[1] - 0.5), rel=1e-6)
+    assert t.influence["a"] == pytest.approx(abs(coef[0] - 0.3), abs=1e-9)
+
+
+def test_estimate_beyond_its_physical_bound_stays_at_the_bound():
+    """A signal the bounded effect cannot explain: named, pinned at the bound, misfit left."""
+    y = 0.3 + 0.5 * X + 150.0 * X**2 + np.random.default_rng(2).standard_normal(X.size)
+    d = dia.diagnose(toy_problem(y))
+    assert d.named[0] == "quadratic"
+    assert d.after.params["c_quadratic"] == pytest.approx(100.0, rel=1e-6)
+    assert d.unexplained

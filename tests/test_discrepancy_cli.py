@@ -64,12 +64,14 @@ def test_collimation_axis_offsets_named_collimation_absorbed_with_report(tmp_pat
     assert "Monte Carlo" in (rep / "report.md").read_text()
 
 
-def test_null_data_report_no_missing_effect(tmp_path):
-    data = tmp_path / "n.csv"
-    assert run_cli("synth", "ground", data, "--seed", 5).returncode == 0
-    diag = run_cli("diagnose", "ground", data, *GROUND)
-    assert diag.returncode == 0, diag.stderr
-    assert "no missing effect" in diag.stdout
+def test_null_data_report_no_missing_effect(tmp_path, capsys):
+    data, out = tmp_path / "n.csv", tmp_path / "n.json"
+    assert main(["synth", "ground", str(data), "--seed", "5"]) == 0
+    assert main(["diagnose", "ground", str(data), *GROUND, "--json", str(out)]) == 0
+    assert "no missing effect" in capsys.readouterr().out
+    report = json.loads(out.read_text())
+    assert report["detected"] is False and report["named_effects"] == []
+    assert report["gap"]["before"] == report["gap"]["after"]
 
 
 GROUND_OK = "target,x_m,y_m,z_m,px,pz\n" + "".join(
