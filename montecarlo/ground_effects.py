@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -221,8 +222,16 @@ def read_ground_csv(path: str | Path, camera: Camera) -> GroundData:
         raise InputError(f"{path}: row {int(zero[0]) + 2}, column 'x_m': target at the sensor "
                          "origin (0, 0, 0) has no direction")
     t = table["t_s"].to_numpy(float) if "t_s" in table.columns else None
-    return GroundData(tuple(table["target"]), positions, table[["px", "pz"]].to_numpy(float), t,
+    data = GroundData(tuple(table["target"]), positions, table[["px", "pz"]].to_numpy(float), t,
                       session)
+    start = initial_mounting(data, camera)
+    C = mounting_matrix(start["psi"], start["theta"], start["gamma"])
+    behind = np.flatnonzero((positions @ C.T)[:, 1] <= 0.0)
+    if behind.size:
+        raise InputError(f"{path}: row {int(behind[0]) + 2}, columns 'x_m', 'y_m', 'z_m': the "
+                         "target is behind the sensor for the mounting that best fits the "
+                         "measured directions (check the frame: x right, y forward, z up)")
+    return data
 
 
 def write_ground_csv(path: str | Path, data: GroundData) -> None:
@@ -331,7 +340,9 @@ def initial_mounting(data: GroundData, camera: Camera) -> dict[str, float]:
     """
     b = data.positions / np.linalg.norm(data.positions, axis=1, keepdims=True)
     a = direction_from_pixels(data.pixels[:, 0], data.pixels[:, 1], camera)
-    rotation, _ = Rotation.align_vectors(a, b)
+    with warnings.catch_warnings():  # degenerate directions: the fit reports them (FitError)
+        warnings.simplefilter("ignore", UserWarning)
+        rotation, _ = Rotation.align_vectors(a, b)
     psi, theta, gamma = euler_zxy_from_matrix(rotation.as_matrix())
     return {"psi": float(psi), "theta": float(theta), "gamma": float(gamma)}
 

@@ -241,3 +241,30 @@ def test_run_trials_contract():
         np.testing.assert_array_equal(out[k], again[k])
     with pytest.raises(ValueError, match="unknown"):
         ge.run_trials({"nope": 1.0}, rng, 1)
+
+
+def test_study_file_with_units_at_the_edge(tmp_path):
+    """A TOML study of the registered system: keys carry units, run_trials gets SI."""
+    from montecarlo.runner import RunOptions, run_study
+    from montecarlo.study import load_study
+
+    path = tmp_path / "d.toml"
+    path.write_text('[study]\nsystem = "discrepancy_ground"\ntrials = 6\nseed = 1\n'
+                    '[params]\npsi_deg = 30.0\npixel_sigma_px = 0.3\ndiagnose = 1\n'
+                    'expected = "focal_scale"\ninject_mdb = 3.0\n')
+    study = load_study(path)
+    assert study.points[0].prepared.params["psi"] == pytest.approx(math.radians(30.0))
+    result = run_study(study, RunOptions(n_jobs=1, progress=False, checkpoint_dir=tmp_path))
+    row = result.to_frame().query("metric == 'named_expected'").iloc[0]
+    assert row["count"] == 6 and row["mean"] == 1.0
+
+
+def test_target_behind_the_sensor_is_one_line(tmp_path):
+    data = ge.simulate(LAYOUT, CAM, MOUNT, 0.3, 0.0, 1)
+    flipped = data.positions.copy()
+    flipped[4] *= -1.0
+    path = tmp_path / "g.csv"
+    ge.write_ground_csv(path, ge.GroundData(data.targets, flipped, data.pixels, data.t))
+    with pytest.raises(InputError, match=r"row 6, columns 'x_m', 'y_m', 'z_m': the target is "
+                                         r"behind the sensor"):
+        ge.read_ground_csv(path, CAM)
