@@ -466,6 +466,227 @@ def _add_stabilization_commands(sub: argparse._SubParsersAction) -> None:
     obs.set_defaults(func=_cmd_stabilization_observability)
 
 
+def _unit(unit: str) -> str:
+    return "" if unit == "1" else f" {unit}"
+
+
+def _diagnosis_output(args: argparse.Namespace, d, view, source: str) -> int:
+    from montecarlo import discrepancy_report as rep
+
+    report = rep.to_json(d, view, source)
+    if args.report:
+        rep.write_report(args.report, d, view, report, trials=args.trials, seed=args.seed,
+                         n_jobs=args.n_jobs)
+    if args.json:
+        _write_text_atomic(args.json, json.dumps(report, indent=2) + "\n")
+    print(rep.format_text(report))
+    if args.report:
+        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
+              "gap.png)")
+    return 0
+
+
+def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
+    from montecarlo import discrepancy as dia
+    from montecarlo import ground_effects as ge
+    from montecarlo.camera import Camera
+
+    try:
+        camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
+                                     args.pixels[1])
+    except ValueError as exc:
+        raise InputError(f"montecarlo diagnose ground: {exc}") from None
+    data = ge.read_ground_csv(args.data, camera)
+    sigma, survey = args.pixel_sigma, args.survey_sigma_m
+    try:
+        d = dia.diagnose(ge.ground_problem(data, camera, sigma, survey), args.alpha)
+    except dia.FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey),
+                             str(args.data))
+
+
+def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
+    from montecarlo import collimation as col
+    from montecarlo import collimation_effects as ce
+    from montecarlo import discrepancy as dia
+
+    data = ce.read_mirror_csv(args.data)
+    sigma = args.angle_sigma_arcsec * col.ARCSEC
+    try:
+        d = dia.diagnose(ce.collimation_problem(data, sigma), args.alpha)
+    except dia.FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+
+
+def _cmd_synth_ground(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from montecarlo import ground_effects as ge
+    from montecarlo import synth
+    from montecarlo.camera import Camera
+
+    try:
+        camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
+                                     args.pixels[1])
+    except ValueError as exc:
+        raise InputError(f"montecarlo synth ground: {exc}") from None
+    candidates = {c.name: c for c in ge.candidates_for(ge.GroundData(
+        (), np.zeros((0, 3)), np.zeros((0, 2)), None, None if args.sessions < 2 else
+        tuple(f"S{i + 1}" for i in range(args.sessions))))[0] if c.parameters}
+    effects = synth.parse_effects(args.effect, candidates, ge.display_unit)
+    at_mdb = synth.parse_multiples(args.at_mdb, candidates)
+    mounting = dict(zip(("psi", "theta", "gamma"), map(math.radians, args.mounting_deg),
+                        strict=True))
+    data, truth, dropped = synth.synth_ground(
+        seed=args.seed, camera=camera, pixel_sigma=args.pixel_sigma,
+        survey_sigma=args.survey_sigma_m, mounting=mounting, ranges=args.ranges_m,
+        grid=tuple(args.grid), spread=args.spread, duration=args.duration_s,
+        sessions=args.sessions, effects=effects, at_mdb=at_mdb,
+        atmosphere=not args.no_atmosphere, with_time=not args.no_time)
+    if data.n < ge.min_targets():
+        raise InputError(f"montecarlo synth ground: only {data.n} targets on the detector")
+    ge.write_ground_csv(args.out, data)
+    if args.truth:
+        _write_text_atomic(args.truth, synth.truth_report(
+            "ground", args.seed, truth, ge.display_unit, pixel_sigma=args.pixel_sigma,
+            survey_sigma_m=args.survey_sigma_m, dropped_targets=dropped))
+    shown = {k: v / ge.display_unit(k)[1] for k, v in truth.items()
+             if k not in ("psi", "theta", "gamma") and v != 0.0}
+    print(f"wrote {args.out}: {data.n} observations ({dropped} off the detector dropped), "
+          f"seed {args.seed}; injected: "
+          + (", ".join(f"{k} = {v:.4g}{_unit(ge.display_unit(k)[0])}" for k, v in shown.items())
+             or "nothing"))
+    return 0
+
+
+def _cmd_synth_collimation(args: argparse.Namespace) -> int:
+    from montecarlo import collimation as col
+    from montecarlo import collimation_effects as ce
+    from montecarlo import synth
+
+    candidates = {c.name: c for c in ce.CANDIDATES}
+    effects = synth.parse_effects(args.effect, candidates, ce.display_unit)
+    at_mdb = synth.parse_multiples(args.at_mdb, candidates)
+    ins = args.ins_sigma_arcsec * col.ARCSEC
+    noise = col.Noise(args.theodolite_sigma_arcsec * col.ARCSEC, ins, ins, ins,
+                      math.radians(args.mount_roll_sigma_deg))
+    data, truth = synth.synth_collimation(
+        seed=args.seed, n_azimuth=args.n_azimuth, n_pitch=args.n_pitch,
+        azimuth_span=math.radians(args.azimuth_span_deg),
+        pitch_span=math.radians(args.pitch_span_deg),
+        frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
+        at_mdb=at_mdb, with_roll=args.with_roll or args.mount_roll_sigma_deg > 0)
+    synth.write_collimation_csv(args.out, data)
+    sigma = math.hypot(args.theodolite_sigma_arcsec, args.ins_sigma_arcsec)
+    if args.truth:
+        _write_text_atomic(args.truth, synth.truth_report(
+            "collimation", args.seed, truth, ce.display_unit, angle_sigma_arcsec=sigma))
+    shown = {k: v / ce.display_unit(k)[1] for k, v in truth.items()
+             if k != "frame_heading" and v != 0.0}
+    print(f"wrote {args.out}: {len(data.mirror)} mirrors, seed {args.seed}; diagnose with "
+          f"--angle-sigma-arcsec {sigma:.4g}; injected: "
+          + (", ".join(f"{k} = {v:.4g}{_unit(ce.display_unit(k)[0])}" for k, v in shown.items())
+             or "nothing"))
+    return 0
+
+
+def _add_discrepancy_commands(sub: argparse._SubParsersAction) -> None:
+    diag = sub.add_parser("diagnose", help="detect, identify and adapt a missing effect in "
+                          "measured data (issue 5)")
+    dsub = diag.add_subparsers(dest="diagnose_command", required=True, parser_class=_Parser)
+
+    def common(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--json", metavar="OUT.json", help="write the diagnosis as JSON")
+        p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and "
+                       "plots (residuals, gap, Monte Carlo of the residual statistic)")
+        p.add_argument("--alpha", type=_probability, default=0.01,
+                       help="significance of the tests (default 0.01)")
+        p.add_argument("--trials", type=_nonnegative_int, default=200,
+                       help="Monte Carlo data sets per model in --report (default 200; 0: none)")
+        p.add_argument("--seed", type=_nonnegative_int, default=0,
+                       help="seed of the --report Monte Carlo (default 0)")
+        p.add_argument("--n-jobs", type=_positive_int, default=1,
+                       help="workers of the --report Monte Carlo (default 1)")
+
+    p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")
+    p.add_argument("data", help="CSV: target, x_m, y_m, z_m, px, pz[, t_s][, session]")
+    p.add_argument("--fov-deg", type=_positive, nargs=2, required=True, metavar=("FY", "FP"),
+                   help="full fields of view about z (yaw) and x (pitch) [deg]")
+    p.add_argument("--pixels", type=_positive_int, nargs=2, required=True,
+                   metavar=("NX", "NZ"), help="pixel counts across x and z")
+    p.add_argument("--pixel-sigma", type=_positive, required=True, metavar="S",
+                   help="standard deviation of each image coordinate [px]")
+    p.add_argument("--survey-sigma-m", type=_non_negative, default=0.0, metavar="S",
+                   help="standard deviation of each surveyed coordinate [m] (default 0)")
+    common(p)
+    p.set_defaults(func=_cmd_diagnose_ground)
+
+    p = dsub.add_parser("collimation", help="autocollimator-INS mirror readings (seed 003)")
+    p.add_argument("data", help="CSV: mirror, set, theodolite_az_deg, theodolite_el_deg, "
+                   "ins_az_deg, ins_el_deg[, ins_roll_deg]")
+    p.add_argument("--angle-sigma-arcsec", type=_positive, required=True, metavar="S",
+                   help="standard deviation of each heading and pitch residual [arc-seconds]")
+    common(p)
+    p.set_defaults(func=_cmd_diagnose_collimation)
+
+    syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
+    ssub = syn.add_subparsers(dest="synth_command", required=True, parser_class=_Parser)
+
+    def effect_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("out", help="CSV file to write")
+        p.add_argument("--seed", type=_nonnegative_int, default=0)
+        p.add_argument("--effect", action="append", default=[], metavar="NAME=V[,V...]",
+                       help="inject an effect, one value per parameter in report units "
+                       "(repeatable)")
+        p.add_argument("--at-mdb", action="append", default=[], metavar="NAME=MULT",
+                       help="inject an effect at MULT times its minimal detectable bias "
+                       "(repeatable)")
+        p.add_argument("--truth", metavar="OUT.json", help="also write how the data were made")
+
+    p = ssub.add_parser("ground", help="targets spread over the field at several ranges")
+    effect_options(p)
+    p.add_argument("--fov-deg", type=_positive, nargs=2, default=[90.0, 90.0])
+    p.add_argument("--pixels", type=_positive_int, nargs=2, default=[512, 512])
+    p.add_argument("--pixel-sigma", type=_non_negative, default=0.3, help="[px] (0.3)")
+    p.add_argument("--survey-sigma-m", type=_non_negative, default=0.01, help="[m] (0.01)")
+    p.add_argument("--mounting-deg", type=float, nargs=3, default=[30.0, 20.0, 10.0],
+                   metavar=("PSI", "THETA", "GAMMA"), help="true mounting (seed 000: 30 20 10)")
+    p.add_argument("--ranges-m", type=_positive, nargs="+", default=[50.0, 100.0])
+    p.add_argument("--grid", type=_positive_int, nargs=2, default=[6, 6],
+                   metavar=("NX", "NZ"), help="targets across and up the field (6 6)")
+    p.add_argument("--spread", type=_positive, default=0.8,
+                   help="fraction of the field covered (0.8)")
+    p.add_argument("--duration-s", type=_non_negative, default=3600.0)
+    p.add_argument("--sessions", type=_positive_int, default=1,
+                   help="observe the layout in this many sessions (session column if > 1)")
+    p.add_argument("--no-atmosphere", action="store_true",
+                   help="no earth curvature and refraction (default: physical c = 1, k = 0.13)")
+    p.add_argument("--no-time", action="store_true", help="omit the t_s column")
+    p.set_defaults(func=_cmd_synth_ground)
+
+    p = ssub.add_parser("collimation", help="seed 003 fixture: azimuth and pitch mirrors")
+    effect_options(p)
+    p.add_argument("--n-azimuth", type=_positive_int, default=7)
+    p.add_argument("--n-pitch", type=_positive_int, default=7)
+    p.add_argument("--azimuth-span-deg", type=float, default=90.0)
+    p.add_argument("--pitch-span-deg", type=float, default=60.0)
+    p.add_argument("--frame-heading-deg", type=float, default=30.0)
+    p.add_argument("--theodolite-sigma-arcsec", type=_non_negative, default=2.0)
+    p.add_argument("--ins-sigma-arcsec", type=_non_negative, default=2.0)
+    p.add_argument("--mount-roll-sigma-deg", type=_non_negative, default=0.0)
+    p.add_argument("--with-roll", action="store_true", help="write the ins_roll_deg column")
+    p.set_defaults(func=_cmd_synth_collimation)
+
+
+def _probability(text: str) -> float:
+    value = float(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not in (0, 1)")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="montecarlo",
@@ -511,6 +732,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_transfer_alignment_commands(sub)
     _add_collimation_commands(sub)
     _add_stabilization_commands(sub)
+    _add_discrepancy_commands(sub)
     return parser
 
 

@@ -67,6 +67,8 @@ _REGISTRY = {
     "air": "montecarlo.param_systems:AIR",
     "collimation": "montecarlo.param_systems:COLLIMATION",
     "stabilization": "montecarlo.param_systems:STABILIZATION",
+    "discrepancy_ground": "montecarlo.ground_effects:STUDY_SYSTEM",
+    "discrepancy_collimation": "montecarlo.collimation_effects:STUDY_SYSTEM",
 }
 SYSTEM_NAMES = tuple(_REGISTRY)
 

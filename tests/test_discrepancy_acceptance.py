@@ -1,0 +1,66 @@
+"""Acceptance of the discrepancy workflow (issue 5).
+
+Fast tests: a few dozen data sets of the realistic layouts (36 targets over the field at 50 and
+100 m; seed 003's 7 + 7 mirrors). Tolerances come from binomial tails: with a true rate of
+1 % false naming, 3 or more of 40 happen with probability 0.8 %; with a true 95 % success rate,
+fewer than 16 of 20 happen with probability 1.6 %.
+
+Slow tests (``-m slow``): the full acceptance, 500 data sets per scenario through the study
+runner (``python -m montecarlo.discrepancy_acceptance`` prints the same table).
+"""
+
+import numpy as np
+import pytest
+
+from montecarlo import collimation_effects as ce
+from montecarlo import discrepancy_acceptance as acc
+from montecarlo import ground_effects as ge
+
+
+def rates(module, n, seed, **params):
+    out = module.run_trials({"diagnose": 1, **params}, np.random.default_rng(seed), n)
+    return {k: np.nanmean(v) if np.isfinite(v).any() else np.nan for k, v in out.items()}, out
+
+
+def test_ground_null_names_nothing_and_never_the_atmosphere():
+    r, out = rates(ge, 40, 1)
+    assert np.count_nonzero(out["named_any"]) <= 2
+    assert r["named_watched"] == 0.0
+
+
+def test_ground_effect_at_1p5_mdb_is_named():
+    _, out = rates(ge, 20, 2, expected="radial_distortion", inject_mdb=1.5)
+    assert np.count_nonzero(out["named_expected_or_group"]) >= 16
+    assert np.count_nonzero(out["chi2_red_after_in_band"]) >= 16
+
+
+def test_collimation_null_and_confounded_collimation():
+    _, out = rates(ce, 40, 3)
+    assert np.count_nonzero(out["named_any"]) <= 2
+    _, out = rates(ce, 20, 4, expected="theodolite_collimation", inject_mdb=1.5)
+    assert np.count_nonzero(out["named_expected_or_group"]) >= 16
+
+
+def test_scenarios_cover_every_testable_effect():
+    labels = [s["label"] for s in acc.scenarios("ground")]
+    assert labels[0] == "null"
+    assert {"radial_distortion", "focal_scale", "drift", "lever_arm"} <= set(labels)
+    assert not {"refraction", "earth_curvature", "detector_rotation"} & set(labels)
+    labels = [s["label"] for s in acc.scenarios("collimation")]
+    assert "paper" in labels and "paper+theodolite_collimation" not in labels
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("system", ["ground", "collimation"])
+def test_full_acceptance(system):
+    table = acc.run(system, trials=500, seed=2024, n_jobs=2)
+    print("\n" + acc.to_markdown(table))
+    null = table[table.scenario == "null"].iloc[0]
+    assert null.trials >= 500
+    assert null.named_any <= 0.05
+    if system == "ground":
+        assert (table.named_watched == 0).all()  # refraction, curvature never named
+    for r in table[table.scenario != "null"].itertuples():
+        assert r.named_or_group >= 0.90, r.scenario
+        assert r.within_2sigma >= 0.90, r.scenario
+        assert r.after_in_band >= 0.90, r.scenario

@@ -1,0 +1,270 @@
+"""Ground forward model with candidate effects (issue 5), checked against independent routes."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from montecarlo import discrepancy as dia
+from montecarlo import ground
+from montecarlo import ground_effects as ge
+from montecarlo.camera import Camera
+from montecarlo.exceptions import InputError
+
+CAM = Camera.from_degrees(90.0, 90.0, 512, 512)
+MOUNT = dict(ge.DEFAULT_MOUNTING)
+LAYOUT = ge.default_layout(CAM, MOUNT)
+
+
+def predict(params, layout=LAYOUT, camera=CAM):
+    return ge.predict_pixels({**MOUNT, **params}, layout, camera)
+
+
+def moved(layout, positions):
+    return ge.GroundData(layout.targets, positions, layout.pixels, layout.t, layout.session)
+
+
+def test_base_model_equals_seed000_trigonometric_route():
+    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (montecarlo.ground)."""
+    C = Rotation.from_euler("ZXY", [MOUNT["psi"], MOUNT["theta"], MOUNT["gamma"]]).as_matrix().T
+    expected, flags = ground.observe_target(C, LAYOUT.positions, CAM)
+    assert not flags.any()
+    np.testing.assert_allclose(predict({}), expected, rtol=1e-12, atol=1e-9)
+
+
+def test_layout_is_spread_over_the_field_at_two_ranges():
+    pix = predict({})
+    assert LAYOUT.n == 36
+    assert np.all(np.abs(pix) <= 256) and np.ptp(pix[:, 0]) > 300 and np.ptp(pix[:, 1]) > 300
+    np.testing.assert_allclose(sorted(set(np.round(np.linalg.norm(LAYOUT.positions, axis=1),
+                                                   9))), [50.0, 100.0])
+
+
+def tangent(pix, camera=CAM):
+    return pix / np.array([camera.k_x, camera.k_z])
+
+
+def test_radial_distortion_scales_the_tangent_radius():
+    """r -> r (1 + k1 r^2) along the same image direction (the issue's parametrisation)."""
+    t0, t1 = tangent(predict({})), tangent(predict({"k1": 0.03}))
+    r0, r1 = np.linalg.norm(t0, axis=1), np.linalg.norm(t1, axis=1)
+    np.testing.assert_allclose(r1, r0 * (1 + 0.03 * r0**2), rtol=1e-12)
+    np.testing.assert_allclose(t1 / r1[:, None], t0 / r0[:, None], atol=1e-12)
+
+
+def test_tangential_distortion_formula():
+    t0, t1 = tangent(predict({})), tangent(predict({"p1": 0.002, "p2": -0.001}))
+    x, z = t0.T
+    r2 = x**2 + z**2
+    np.testing.assert_allclose(t1[:, 0], x + 2 * 0.002 * x * z - 0.001 * (r2 + 2 * x**2),
+                               rtol=1e-12)
+    np.testing.assert_allclose(t1[:, 1], z + 0.002 * (r2 + 2 * z**2) - 2 * 0.001 * x * z,
+                               rtol=1e-12)
+
+
+def test_image_plane_effects():
+    p0 = predict({})
+    np.testing.assert_allclose(predict({"s": 0.01}), 1.01 * p0, rtol=1e-12)
+    np.testing.assert_allclose(predict({"a": 0.02}), p0 * [1.01, 0.99], rtol=1e-12)
+    np.testing.assert_allclose(predict({"c_x": 1.5, "c_z": -2.0}), p0 + np.array([1.5, -2.0]),
+                               rtol=1e-12)
+    rho = 0.01
+    rot = np.array([[math.cos(rho), math.sin(rho)], [-math.sin(rho), math.cos(rho)]])
+    np.testing.assert_allclose(predict({"rho": rho}), p0 @ rot, rtol=1e-12)
+
+
+def test_detector_rotation_equals_roll_for_square_pixels():
+    """With k_x = k_z an image rotation is a roll of frame a: detector_rotation is absorbed."""
+    np.testing.assert_allclose(predict({"rho": 0.01}),
+                               ge.predict_pixels({**MOUNT, "gamma": MOUNT["gamma"] + 0.01},
+                                                 LAYOUT, CAM), atol=1e-9)
+
+
+def test_target_effects_move_the_targets():
+    r = LAYOUT.positions
+    np.testing.assert_allclose(predict({"s_h": 0.02}),
+                               predict({}, moved(LAYOUT, r * [1, 1, 1.02])), rtol=1e-12)
+    for key, axis in (("b_x", 0), ("b_y", 1), ("b_z", 2)):
+        shift = np.zeros(3)
+        shift[axis] = 0.3
+        np.testing.assert_allclose(predict({key: 0.3}), predict({}, moved(LAYOUT, r + shift)),
+                                   rtol=1e-12)
+    # the projection centre at l sees r - l: a lever arm is minus a common target bias
+    np.testing.assert_allclose(predict({"l_x": 0.1, "l_y": -0.2, "l_z": 0.3}),
+                               predict({"b_x": -0.1, "b_y": 0.2, "b_z": -0.3}), rtol=1e-12)
+
+
+def test_refraction_and_curvature_at_physical_magnitudes():
+    """Apparent height - (1 - k) d^2 / (2R); at 100 m that is 0.66 mm, ~0.002 px here."""
+    d2 = np.sum(LAYOUT.positions[:, :2] ** 2, axis=1)
+    drop = (1 - 0.13) * d2 / (2 * 6_371_000.0)
+    expected = predict({}, moved(LAYOUT, LAYOUT.positions - np.outer(drop, [0, 0, 1])))
+    got = predict({"c": 1.0, "k": 0.13})
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    assert 1e-4 < np.max(np.abs(got - predict({}))) < 0.01
+
+
+def test_drift_is_linear_in_time_about_the_mean_epoch():
+    w = np.array([2e-7, -1e-7, 3e-7])
+    got = predict(dict(zip(("w_psi", "w_theta", "w_gamma"), w, strict=True)))
+    dt = LAYOUT.t - LAYOUT.t.mean()
+    for i in (0, 7, 20):
+        angles = {k: MOUNT[k] + w[j] * dt[i] for j, k in enumerate(("psi", "theta", "gamma"))}
+        one = ge.GroundData(LAYOUT.targets[i:i + 1], LAYOUT.positions[i:i + 1],
+                            LAYOUT.pixels[i:i + 1])
+        np.testing.assert_allclose(got[i], ge.predict_pixels(angles, one, CAM)[0], rtol=1e-12)
+
+
+def test_batched_parameters_equal_single_evaluations():
+    values = [0.0, 0.01, -0.02]
+    batch = ge.predict_pixels({**MOUNT, "k1": np.array(values)[:, None],
+                               "b_z": np.array([0.0, 0.1, 0.2])[:, None]}, LAYOUT, CAM)
+    for i, v in enumerate(values):
+        np.testing.assert_allclose(batch[i], predict({"k1": v, "b_z": 0.1 * i}), rtol=1e-12)
+
+
+def test_initial_mounting_recovers_the_truth_from_exact_data():
+    data = ge.GroundData(LAYOUT.targets, LAYOUT.positions, predict({}), LAYOUT.t)
+    start = ge.initial_mounting(data, CAM)
+    for k in ("psi", "theta", "gamma"):
+        assert start[k] == pytest.approx(MOUNT[k], abs=1e-9)
+
+
+def test_pixel_covariance_propagates_the_survey_error():
+    """J J' from central differences of the pinhole against the target position."""
+    cov = ge.pixel_covariance(LAYOUT, CAM, MOUNT, 0.3, 0.02)
+    h = 1e-4
+    J = np.stack([(predict({}, moved(LAYOUT, LAYOUT.positions + h * e))
+                   - predict({}, moved(LAYOUT, LAYOUT.positions - h * e))) / (2 * h)
+                  for e in np.eye(3)], axis=-1)
+    expected = 0.09 * np.eye(2) + 0.0004 * J @ np.swapaxes(J, 1, 2)
+    np.testing.assert_allclose(cov, expected, rtol=1e-6)
+
+
+def analyse(layout, camera, truth=MOUNT, sigma=0.3):
+    problem = ge.exact_problem(layout, camera, truth, sigma, 0.0)
+    fit = dia.fit_model(problem, ())
+    return {t.name: t for t in dia.analyse_candidates(problem, fit)}
+
+
+def test_what_the_default_layout_can_and_cannot_tell():
+    tests = analyse(LAYOUT, CAM)
+    assert tests["detector_rotation"].status == "absorbed"
+    assert tests["detector_rotation"].absorbed_by == {"rho": ["gamma"]}
+    assert tests["refraction"].status == "undetectable"
+    assert tests["earth_curvature"].status == "undetectable"
+    assert tests["session_shift"].status == "unavailable"
+    for name in ("radial_distortion", "focal_scale", "principal_point", "drift", "lever_arm"):
+        assert tests[name].status == "testable"
+    assert dia.canonical_correlation(tests["target_height_bias"], tests["lever_arm"]) == \
+        pytest.approx(1.0, abs=1e-9)
+
+
+def test_principal_point_is_absorbed_by_yaw_and_pitch_in_a_narrow_field():
+    """A 2-degree field: a shift of the image centre is a yaw/pitch rotation to < 5 %."""
+    narrow = Camera.from_degrees(2.0, 2.0, 1000, 1000)
+    mount = {"psi": 0.01, "theta": -0.02, "gamma": 0.005}
+    layout = ge.field_layout(narrow, mount, (500.0, 1000.0), (6, 6), 0.8, 3600.0, rng=1)
+    tests = analyse(layout, narrow, mount)
+    assert tests["principal_point"].status == "absorbed"
+    assert set(tests["principal_point"].absorbed_by) == {"c_x", "c_z"}
+    wide = analyse(LAYOUT, CAM)["principal_point"]
+    assert wide.status == "testable" and min(wide.retained.values()) > 0.2
+
+
+def test_session_shift_with_two_sessions():
+    layout = ge.field_layout(CAM, MOUNT, (50.0, 100.0), (4, 4), 0.8, 1800.0, sessions=2, rng=3)
+    truth = {**MOUNT, "theta_shift_S2": 2e-3}
+    data = ge.simulate(layout, CAM, truth, 0.3, 0.0, 4)
+    d = dia.diagnose(ge.ground_problem(data, CAM, 0.3))
+    assert d.named == ["session_shift"]
+    est, se = d.after.params, d.after.stderr
+    assert abs(est["theta_shift_S2"] - 2e-3) < 3 * se["theta_shift_S2"]
+
+
+def test_simulation_noise_matches_the_stated_sigma():
+    """chi2 of the true parameters over many simulated sets averages 2n (unit variance)."""
+    rng = np.random.default_rng(2)
+    chi2 = []
+    for _ in range(40):
+        data = ge.simulate(LAYOUT, CAM, MOUNT, 0.3, 0.02, rng)
+        r = ge.ground_problem(data, CAM, 0.3, 0.02).residuals(MOUNT)
+        chi2.append(r @ r)
+    n = 2 * LAYOUT.n
+    assert np.mean(chi2) == pytest.approx(n, abs=4 * math.sqrt(2 * n / 40))
+
+
+def write(tmp_path, text):
+    p = tmp_path / "data.csv"
+    p.write_text(text)
+    return p
+
+
+def test_csv_round_trip(tmp_path):
+    data = ge.simulate(LAYOUT, CAM, MOUNT, 0.3, 0.01, 1)
+    path = tmp_path / "g.csv"
+    ge.write_ground_csv(path, data)
+    back = ge.read_ground_csv(path, CAM)
+    np.testing.assert_allclose(back.positions, data.positions, atol=5e-5)
+    np.testing.assert_allclose(back.pixels, data.pixels, atol=5e-7)
+    np.testing.assert_allclose(back.t, data.t, atol=0.05)
+    assert back.targets == data.targets and back.session is None
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    ("target,x_m,y_m,z_m,px\nA,1,50,0,0\n", r"missing column 'pz'"),
+    ("target,x_m,y_m,z_m,px,pz\n" + "A,1,50,0,0,0\n" * 3, r"3 data rows, at least 4"),
+    ("target,x_m,y_m,z_m,px,pz\n" + "A,1,50,0,0,0\n" * 4 + "B,1,x,0,0,0\n",
+     r"row 6, column 'y_m': 'x' is not a finite number"),
+    ("target,x_m,y_m,z_m,px,pz,t_s\n" + "A,1,50,0,0,0,1\n" * 4 + "B,1,5,0,0,0,nan\n",
+     r"row 6, column 't_s'"),
+    ("target,x_m,y_m,z_m,px,pz\n" + "A,1,50,0,0,0\n" * 4 + "B,1,5,0,300,0\n",
+     r"row 6, column 'px': 300.0 is outside the detector"),
+    ("target,x_m,y_m,z_m,px,pz,session\n" + "A,1,50,0,0,0,s\n" * 4 + "B,1,5,0,0,0,\n",
+     r"row 6, column 'session': empty value"),
+])
+def test_malformed_csv_is_one_line(tmp_path, body, message):
+    path = write(tmp_path, body)
+    with pytest.raises(InputError, match=message) as info:
+        ge.read_ground_csv(path, CAM)
+    assert "\n" not in str(info.value) and str(path) in str(info.value)
+
+
+def test_run_trials_contract():
+    rng = np.random.default_rng(0)
+    out = ge.run_trials({"diagnose": 1}, rng, 3)
+    assert set(out) == set(ge.METRICS)
+    assert all(v.shape == (3,) and v.dtype == np.float64 for v in out.values())
+    again = ge.run_trials({"diagnose": 1}, np.random.default_rng(0), 3)
+    for k in out:
+        np.testing.assert_array_equal(out[k], again[k])
+    with pytest.raises(ValueError, match="unknown"):
+        ge.run_trials({"nope": 1.0}, rng, 1)
+
+
+def test_study_file_with_units_at_the_edge(tmp_path):
+    """A TOML study of the registered system: keys carry units, run_trials gets SI."""
+    from montecarlo.runner import RunOptions, run_study
+    from montecarlo.study import load_study
+
+    path = tmp_path / "d.toml"
+    path.write_text('[study]\nsystem = "discrepancy_ground"\ntrials = 6\nseed = 1\n'
+                    '[params]\npsi_deg = 30.0\npixel_sigma_px = 0.3\ndiagnose = 1\n'
+                    'expected = "focal_scale"\ninject_mdb = 3.0\n')
+    study = load_study(path)
+    assert study.points[0].prepared.params["psi"] == pytest.approx(math.radians(30.0))
+    result = run_study(study, RunOptions(n_jobs=1, progress=False, checkpoint_dir=tmp_path))
+    row = result.to_frame().query("metric == 'named_expected'").iloc[0]
+    assert row["count"] == 6 and row["mean"] == 1.0
+
+
+def test_target_behind_the_sensor_is_one_line(tmp_path):
+    data = ge.simulate(LAYOUT, CAM, MOUNT, 0.3, 0.0, 1)
+    flipped = data.positions.copy()
+    flipped[4] *= -1.0
+    path = tmp_path / "g.csv"
+    ge.write_ground_csv(path, ge.GroundData(data.targets, flipped, data.pixels, data.t))
+    with pytest.raises(InputError, match=r"row 6, columns 'x_m', 'y_m', 'z_m': the target is "
+                                         r"behind the sensor"):
+        ge.read_ground_csv(path, CAM)
