@@ -152,7 +152,7 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
             xs = xs.sort_values(key).reset_index(drop=True)
         fig = Figure(figsize=(max(6.5, 5.0 * len(variants)), 3.6 * len(rows) + 0.8),
                      layout="constrained")
-        axes = fig.subplots(len(rows), len(variants), squeeze=False, sharex=True, sharey=True)
+        axes = fig.subplots(len(rows), len(variants), squeeze=False, sharex=True, sharey="row")
         for (r, row), (c, variant) in itertools.product(enumerate(rows), enumerate(variants)):
             ax = axes[r, c]
             panel = _select(data_k[data_k["variant"] == variant], row_keys, row)
@@ -182,7 +182,8 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
             if study.spec and study.spec.variant in (None, variant):
                 ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
             title = ", ".join(short_label(k, v) for k, v in zip(row_keys, row, strict=True))
-            ax.set_title(f"{variant}" + (f" — {title}" if title else ""), fontsize=9)
+            name = "" if variants == ["default"] else variant
+            ax.set_title(" — ".join(t for t in (name, title) if t), fontsize=9)
             ax.grid(alpha=0.3, which="both")
             if r == len(rows) - 1:
                 if numeric:
@@ -201,12 +202,13 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         else:
             ax0.set_xticks(xs.index, ["\n".join(_fmt(v) for v in row)
                                       for row in xs.itertuples(index=False)], fontsize=7)
-        shown = data_k[data_k["variant"].isin(variants)]
-        lo, hi = np.nanmin(shown["p50"]), np.nanmax(shown["p99" if few else "p95"])
-        if lo > 0 and hi / lo > 30:
-            ax0.set_yscale("log")
-        else:
-            ax0.set_ylim(bottom=0)
+        for r, row in enumerate(rows):  # each row its own scale: log if it spans decades
+            shown = _select(data_k, row_keys, row)
+            lo, hi = np.nanmin(shown["p50"]), np.nanmax(shown["p99" if few else "p95"])
+            if lo > 0 and hi / lo > 30:
+                axes[r, 0].set_yscale("log")
+            else:
+                axes[r, 0].set_ylim(bottom=0)
         n_labels = len(ax0.get_legend_handles_labels()[1])
         if n_labels:
             zipped = [k for k in line_keys if k not in named]
