@@ -7,7 +7,6 @@ a crash never leaves half-written results behind.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import tempfile
 from dataclasses import asdict
@@ -18,7 +17,7 @@ import pandas as pd
 from montecarlo.plots import all_figures
 from montecarlo.provenance import provenance
 from montecarlo.report import render_report
-from montecarlo.runner import RunOptions, StudyResult
+from montecarlo.runner import RunOptions, StudyResult, with_umask
 
 
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions) -> Path:
@@ -27,9 +26,7 @@ def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions) -> Pa
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-"))
-    umask = os.umask(0)
-    os.umask(umask)
-    tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; results are meant to be shared
+    tmp.chmod(with_umask(0o777))  # mkdtemp makes it private; results are meant to be shared
     try:
         summary = result.to_frame()
         summary.to_csv(tmp / "summary.csv", index=False)

@@ -122,6 +122,13 @@ def _chunk_blocks(study: Study, points: list[int], options: RunOptions) -> int:
     return min(MAX_CHUNK_BLOCKS, max(1, math.ceil(total_blocks / (4 * options.n_jobs))))
 
 
+def with_umask(mode: int) -> int:
+    """``mode`` as the process's umask would leave it for a newly created file."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return mode & ~umask
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write a file under a temporary name in the same directory, then rename it."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -129,6 +136,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, with_umask(0o666))  # mkstemp makes it private; results are shared
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
