@@ -94,20 +94,22 @@ class Streams:
         seq = np.random.SeedSequence(self.seed, spawn_key=key)
         return np.random.Generator(np.random.PCG64(seq))
 
-    def fill_standard(self, dist: Distribution, source: str, out: np.ndarray) -> np.ndarray:
-        """Fill ``out`` with standardised draws of a random source: U(-1, 1) or N(0, 1)."""
+    def fill(self, dist: Distribution, source: str, out: np.ndarray) -> np.ndarray:
+        """Fill ``out`` with draws of a random source, in its own units.
+
+        Uniform: ``2 scale U + (location - scale)`` for U ~ U[0, 1) (two passes; the same as
+        ``location + scale (2 U - 1)`` up to rounding). Normal: ``location + scale Z``.
+        """
         gen = self.generator(source)
         if dist.kind == "uniform":
             gen.random(out=out)
-            out *= 2.0
-            out -= 1.0
+            out *= 2.0 * dist.scale
+            out += dist.location - dist.scale
         else:
             gen.standard_normal(out=out)
+            out *= dist.scale
+            out += dist.location
         return out
-
-    def standard(self, dist: Distribution, source: str, n: int) -> np.ndarray:
-        """``n`` standardised draws of a random source (uniform or normal)."""
-        return self.fill_standard(dist, source, np.empty(n))
 
 
 def corner_signs(first_trial: int, n: int, n_corners: int) -> np.ndarray:
@@ -123,28 +125,31 @@ def corner_signs(first_trial: int, n: int, n_corners: int) -> np.ndarray:
 
 def fill_pair(dist: Distribution, relation: str | float, streams: Streams, source: str,
               out_a: np.ndarray, out_b: np.ndarray) -> None:
-    """Standardised draws of one error source seen by two targets, A and B, in place.
+    """Draws of one random error source as seen by two targets, A and B, in place.
 
     ``relation`` is "common" (B = A), "independent", or a correlation coefficient rho in [-1, 1].
-    A's draws are the same whatever the relation (they come from stream ``source + ':a'``).
-    Normal sources: ``z_B = rho z_A + sqrt(1 - rho^2) z_2``. Uniform sources keep uniform
-    marginals through a Gaussian copula whose normal correlation ``2 sin(pi rho / 6)`` gives the
-    uniforms a Pearson correlation of exactly rho.
+    A's values are the same whatever the relation (they come from stream ``source + ':a'``).
+    With standardised draws z: normal sources ``z_B = rho z_A + sqrt(1 - rho^2) z_2``; uniform
+    sources keep uniform marginals through a Gaussian copula whose normal correlation
+    ``2 sin(pi rho / 6)`` gives the uniforms a Pearson correlation of exactly rho.
     """
     rho = {"common": 1.0, "independent": 0.0}.get(relation, relation)  # type: ignore[arg-type]
-    streams.fill_standard(dist, source + ":a", out_a)
+    streams.fill(dist, source + ":a", out_a)
     if rho == 1.0:
         out_b[...] = out_a
         return
-    streams.fill_standard(dist, source + ":b", out_b)
-    if rho == 0.0:
+    streams.fill(dist, source + ":b", out_b)
+    if rho == 0.0 or dist.scale == 0.0:
         return
+    z_a = (out_a - dist.location) / dist.scale
+    z_2 = (out_b - dist.location) / dist.scale
     if dist.kind == "normal":
-        out_b[...] = rho * out_a + np.sqrt(1.0 - rho**2) * out_b
-        return
-    from scipy import special
+        z_b = rho * z_a + np.sqrt(1.0 - rho**2) * z_2
+    else:
+        from scipy import special
 
-    r = 2.0 * np.sin(np.pi * rho / 6.0)
-    n_a = special.ndtri((out_a + 1.0) / 2.0)
-    n_2 = special.ndtri((out_b + 1.0) / 2.0)
-    out_b[...] = 2.0 * special.ndtr(r * n_a + np.sqrt(1.0 - r**2) * n_2) - 1.0
+        r = 2.0 * np.sin(np.pi * rho / 6.0)
+        n_a = special.ndtri((z_a + 1.0) / 2.0)
+        n_2 = special.ndtri((z_2 + 1.0) / 2.0)
+        z_b = 2.0 * special.ndtr(r * n_a + np.sqrt(1.0 - r**2) * n_2) - 1.0
+    out_b[...] = dist.location + dist.scale * z_b

@@ -167,6 +167,16 @@ METRIC_ORDER = ("rotation_angle", "eq18_angle", "table1_angle", "delta_psi", "de
 """The metrics per solver variant, in the order of the fast kernel's rows."""
 
 
+@functools.lru_cache(maxsize=4)
+def _scratch(m: int, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Work buffers of the fast kernel for m trials, reused for every block of a process
+    (fresh megabyte-sized buffers would cost a page fault per 4 KB each time)."""
+    from montecarlo import ground_kernel as gk
+
+    return (np.empty((2, m), np.uint16), np.empty((2 * gk.N_FIELDS, m)), np.empty((rows, m)),
+            np.empty(m, np.int64))
+
+
 class GroundSystem:
     """Seed 000 ground calibration as a :class:`montecarlo.systems.System`."""
 
@@ -212,9 +222,7 @@ class GroundSystem:
         if dist.is_corner:
             out[...] = dist.from_standard(signs[p.corners.index(name)])
         elif dist.is_random:
-            streams.fill_standard(dist, name, out)
-            out *= dist.scale
-            out += dist.location
+            streams.fill(dist, name, out)
         else:
             out[...] = dist.location
 
@@ -247,8 +255,6 @@ class GroundSystem:
         elif p.pixel.is_random:
             fill_pair(p.pixel, p.relation, streams, "pixel_x", pix[0], pix[2])
             fill_pair(p.pixel, p.relation, streams, "pixel_z", pix[1], pix[3])
-            pix *= p.pixel.scale
-            pix += p.pixel.location
         else:
             pix[...] = p.pixel.location
         return tuple(true), errors
@@ -291,18 +297,16 @@ class GroundSystem:
         flag_counts = np.zeros((2, 256), np.int64)
         for s in range(0, n, gk.SUB_CHUNK):
             m = min(gk.SUB_CHUNK, n - s)
-            flags = np.empty((2, m), np.uint16)
-            fields = np.empty((2 * gk.N_FIELDS, m))
+            flags, fields, values, bins = _scratch(m, len(keys))
             gk.solve_chunk(C[:, :m] if C.shape[1] == gk.SUB_CHUNK else C[:, s:s + m],
                            p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
                            cam.n_z / 2.0, e[:, s:s + m], flags, fields)
-            values = np.empty((len(keys), m))
             for j, v in enumerate(variants):
                 i = SOLVERS.index(v)
                 gk.metrics_from_fields(fields[i * gk.N_FIELDS:(i + 1) * gk.N_FIELDS],
                                        values[6 * j:6 * j + 6])
                 flag_counts[i] += np.bincount(flags[i], minlength=256)
-            gk.accumulate(values, stats.hist_matrix, acc, np.empty(m, np.int64))
+            gk.accumulate(values, stats.hist_matrix, acc, bins)
         for r, key in enumerate(keys):
             count, mean, m2, lo, hi = acc[r]
             ms = stats.metrics[key]

@@ -16,15 +16,19 @@ def correlated_pair(dist, relation, streams, source, n):
     return a, b
 
 
+def draw(streams, source, n=100):
+    return streams.fill(UNIFORM, source, np.empty(n))
+
+
 def test_streams_are_common_across_points_only_when_asked():
-    a = Streams(1, point=0, block=3).standard(UNIFORM, "dx_m", 100)
-    b = Streams(1, point=7, block=3).standard(UNIFORM, "dx_m", 100)
+    a = draw(Streams(1, point=0, block=3), "dx_m")
+    b = draw(Streams(1, point=7, block=3), "dx_m")
     assert np.array_equal(a, b)
-    c = Streams(1, point=7, block=3, common=False).standard(UNIFORM, "dx_m", 100)
-    d = Streams(1, point=0, block=3, common=False).standard(UNIFORM, "dx_m", 100)
+    c = draw(Streams(1, point=7, block=3, common=False), "dx_m")
+    d = draw(Streams(1, point=0, block=3, common=False), "dx_m")
     assert not np.array_equal(c, d)
-    assert not np.array_equal(a, Streams(1, point=0, block=4).standard(UNIFORM, "dx_m", 100))
-    assert not np.array_equal(a, Streams(1, point=0, block=3).standard(UNIFORM, "dy_m", 100))
+    assert not np.array_equal(a, draw(Streams(1, point=0, block=4), "dx_m"))
+    assert not np.array_equal(a, draw(Streams(1, point=0, block=3), "dy_m"))
 
 
 def test_streams_match_seedsequence_spawn():
