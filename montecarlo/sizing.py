@@ -643,7 +643,12 @@ def size_relation(problem: SizingProblem, relation: str, options: SizingOptions
     grid["pareto"] = pareto_minimal(problem.doublings(grid), grid["verdict"] == "meets")
     corners, n_bisect = _refine(problem, relation, grid, options)
     corners, n_probe = _probe(problem, relation, corners, options)
-    if len(corners):
+    if not len(corners):
+        names = problem.names
+        corners = pd.DataFrame(columns=[
+            *names, *STAT_COLUMNS, "grid_index", "limiting", "bracket_bad", "status", "refined",
+            *(f"bad_{n}" for n in names), *(f"cheaper_{n}" for n in names), "cost", "cheapest"])
+    else:
         corners["cost"] = problem.cost(corners)
         keep = pareto_minimal(problem.doublings(corners), corners["verdict"] == "meets")
         corners = corners[keep].reset_index(drop=True)
@@ -739,7 +744,7 @@ def size(problem: SizingProblem, options: SizingOptions = SizingOptions(),
     return result
 
 
-# --- report and plot ---------------------------------------------------------------------------
+# --- report and plot -----------------------------------------------------------------------------
 
 RELATION_TEXT = {"common": "pixel error common to both targets (the paper's assumption)",
                  "independent": "pixel error independent between targets (centroid noise)"}
