@@ -31,18 +31,25 @@ statistic is a smooth deterministic function of the knobs and monotone searches 
 1. **grid**: ``levels`` geometric levels per free knob, full product, one verdict per point;
 2. **corners**: the Pareto-minimal points among those that meet (no other meeting point is at
    least as cheap in every knob and cheaper in one);
-3. **limiting knob** of a corner: among its knobs not at their cheap bound, the one whose
-   one-level cheapening raises the statistic most per doubling (the spec is most sensitive to it);
-4. **bisection** along the limiting knob (geometric) between the corner and its cheaper grid
-   neighbour (which does not meet, or the corner would not be Pareto-minimal), to a bracket
-   narrower than ``tolerance``; the other knobs stay at their grid levels, where the next
-   cheaper level does not meet;
-5. the returned point is the expensive (meeting) end of the bracket. With the *replication
-   margin* (default) it must also satisfy ``hi + sqrt(2) (hi - value) <= limit``: an independent
-   run of the same size then meets the spec with probability about (1 + c) / 2, because the
-   difference of two independent estimates has sqrt(2) times the spread of one;
-6. **confirmation**: an independent run (another seed) at the returned point, which should meet,
-   and at a point 10 % cheaper in the limiting knob, which should fail.
+3. **bisection**, coordinate-wise: each knob of a corner that is not at its cheap bound is
+   bisected (geometrically, to a bracket narrower than ``tolerance``) between its current value,
+   which passes, and the next cheaper grid level, which does not (else the corner would not be
+   Pareto-minimal; the statistic is taken to be monotone in each knob). The knobs whose
+   cheapening costs least statistic per unit of cost go first. Afterwards every refined knob is
+   tight: cheapening any of them by more than ``tolerance`` fails the criterion;
+4. *passes* means "meets", and with the **replication margin** (default) also
+   ``hi + sqrt(2) (hi - value) <= limit``: an independent run of the same size then meets the
+   spec with probability about (1 + c) / 2, because the difference of two independent estimates
+   has sqrt(2) times the spread of one. Without it a point on the boundary of "meets" is
+   confirmed by an independent run only about half the time;
+5. **limiting knob**: each refined corner is evaluated 10 % cheaper in each refined knob; the
+   knob whose cheapening raises the statistic most is the limiting one (the spec binds hardest
+   there). The corners are filtered to the Pareto-minimal ones again and the cheapest by cost is
+   the answer;
+6. **confirmation**: an independent run (another seed) at the answer, which should meet, and at
+   the point 10 % cheaper in the limiting knob, which should fail. At a cost-balanced optimum
+   several knobs bind at once and each carries only part of the statistic's sensitivity; the
+   cheaper point may then be "undecided" unless the trials resolve a rise of a few per cent.
 
 Everything is done separately for pixel noise common to both targets and independent between
 them (NOTES.md: the two behave oppositely with range).
@@ -193,6 +200,12 @@ class Knob:
         """``x`` moved ``fraction`` towards the cheap direction (0.9 x or 1.1 x)."""
         return x * (1.0 - fraction) if self.info.cheaper == "smaller" else x * (1.0 + fraction)
 
+    def dearer_by(self, x: float, fraction: float) -> float:
+        """``x`` moved by a factor ``1 + fraction`` towards the expensive direction, clipped to
+        the bounds."""
+        y = x * (1.0 + fraction) if self.info.cheaper == "smaller" else x / (1.0 + fraction)
+        return float(np.clip(y, self.lo, self.hi))
+
 
 def default_knobs(names: Sequence[str] = tuple(KNOBS)) -> tuple[Knob, ...]:
     return tuple(Knob(n, *DEFAULT_BOUNDS[n]) for n in names)
@@ -214,6 +227,14 @@ class SizingOptions:
     n_jobs: int = 2
     slice_levels: int = 6
     """Levels per axis of the plotted slice through the answer (0: no slice)."""
+    confirm_trials: int | None = None
+    """Trials of the confirmation runs (default 4 x trials: half the search's noise)."""
+
+    @property
+    def certification_seed(self) -> int:
+        """Seed of the certification runs: a stream independent of the search seed's (and of
+        small seeds such as seed + 1), derived from it by ``SeedSequence``."""
+        return int(np.random.SeedSequence([self.seed, 0x5EED]).generate_state(1)[0])
 
     def __post_init__(self) -> None:
         if self.levels < 2:
@@ -435,6 +456,8 @@ class RelationSizing:
     grid: pd.DataFrame
     corners: pd.DataFrame
     evaluations: int
+    uncertified: int = 0
+    """Corners of the search that did not pass with the certification seed (dropped)."""
     slice: pd.DataFrame | None = None
     """Evaluations on a plane (or line) of the plotted knobs through the answer."""
     confirmation: pd.DataFrame | None = None
@@ -630,6 +653,58 @@ def _probe(problem: SizingProblem, relation: str, corners: pd.DataFrame, options
     return corners, len(points)
 
 
+MAX_CERTIFY_STEPS = 25
+
+
+def _certify(problem: SizingProblem, relation: str, corners: pd.DataFrame,
+             options: SizingOptions) -> tuple[pd.DataFrame, int]:
+    """Re-evaluate every corner with the independent certification seed.
+
+    The search picks the cheapest of many noisy evaluations, so its own estimates at the picked
+    points are biased low (the winner's curse). A corner that does not pass with fresh random
+    numbers moves its limiting knob dearer in steps of ``tolerance`` until it does (at most
+    :data:`MAX_CERTIFY_STEPS`, within the bounds). The statistic columns then hold the
+    certification's numbers; ``search_value``/``search_hi`` keep the search's.
+    """
+    if not len(corners):
+        return corners, 0
+    seed = options.certification_seed
+    corners = corners.copy()
+    corners["search_value"] = corners["value"]
+    corners["search_hi"] = corners["hi"]
+    corners["certified"] = False
+    steps = {i: 0 for i, c in corners.iterrows() if c["verdict"] == "meets"}
+    todo = list(steps)
+    evaluations = 0
+    while todo:
+        points = [{n: float(corners.loc[i, n]) for n in problem.names} for i in todo]
+        res = evaluate(problem, points, relation, trials=options.trials, seed=seed,
+                       block_size=options.block_size, n_jobs=options.n_jobs,
+                       name=f"sizing-{relation}-certify")
+        evaluations += len(points)
+        ok = res["margin_ok"] if options.replication_margin else res["verdict"] == "meets"
+        nxt = []
+        for i, (_, r), good in zip(todo, res.iterrows(), ok, strict=True):
+            for k in STAT_COLUMNS:
+                corners.at[i, k] = r[k]
+            knob = corners.at[i, "limiting"]
+            if good:
+                corners.at[i, "certified"] = True
+                moved = f", {knob} moved {steps[i]} step(s) dearer" if steps[i] else ""
+                corners.at[i, "status"] += f"; certified with seed {seed}{moved}"
+                continue
+            dearer = problem.knob(knob).dearer_by(corners.at[i, knob], options.tolerance) \
+                if isinstance(knob, str) else None
+            if dearer is None or dearer == corners.at[i, knob] or steps[i] >= MAX_CERTIFY_STEPS:
+                corners.at[i, "status"] += f"; not certified with seed {seed}"
+                continue
+            corners.at[i, knob] = dearer
+            steps[i] += 1
+            nxt.append(i)
+        todo = nxt
+    return corners, evaluations
+
+
 def size_relation(problem: SizingProblem, relation: str, options: SizingOptions
                   ) -> RelationSizing:
     """Grid, Pareto corners, bisection and the cheapest corner for one pixel relation."""
@@ -643,18 +718,23 @@ def size_relation(problem: SizingProblem, relation: str, options: SizingOptions
     grid["pareto"] = pareto_minimal(problem.doublings(grid), grid["verdict"] == "meets")
     corners, n_bisect = _refine(problem, relation, grid, options)
     corners, n_probe = _probe(problem, relation, corners, options)
+    corners, n_cert = _certify(problem, relation, corners, options)
+    uncertified = int((~corners["certified"]).sum()) if len(corners) else 0
+    if len(corners):
+        corners["cost"] = problem.cost(corners)
+        keep = pareto_minimal(problem.doublings(corners), corners["certified"].to_numpy(bool))
+        corners = corners[keep].reset_index(drop=True)
     if not len(corners):
         names = problem.names
         corners = pd.DataFrame(columns=[
             *names, *STAT_COLUMNS, "grid_index", "limiting", "bracket_bad", "status", "refined",
-            *(f"bad_{n}" for n in names), *(f"cheaper_{n}" for n in names), "cost", "cheapest"])
+            *(f"bad_{n}" for n in names), *(f"cheaper_{n}" for n in names), "search_value",
+            "search_hi", "certified", "cost", "cheapest"])
     else:
-        corners["cost"] = problem.cost(corners)
-        keep = pareto_minimal(problem.doublings(corners), corners["verdict"] == "meets")
-        corners = corners[keep].reset_index(drop=True)
         corners["cheapest"] = False
         corners.loc[cheapest(problem, corners, options.order), "cheapest"] = True
-    rs = RelationSizing(relation, grid, corners, len(grid) + n_bisect + n_probe)
+    rs = RelationSizing(relation, grid, corners, len(grid) + n_bisect + n_probe + n_cert,
+                        uncertified=uncertified)
     if options.slice_levels:
         rs.slice = _evaluate_slice(problem, rs, options)
         rs.evaluations += len(rs.slice)
@@ -722,8 +802,9 @@ def size(problem: SizingProblem, options: SizingOptions = SizingOptions(),
          ) -> SizingResult:
     """Size ``problem`` for each pixel relation; confirm each answer with ``confirm_seed``
     (skipped if None)."""
-    if confirm_seed is not None and confirm_seed == options.seed:
-        raise InputError(f"confirm seed: must differ from the search seed {options.seed}")
+    if confirm_seed is not None and confirm_seed in (options.seed, options.certification_seed):
+        raise InputError(f"confirm seed: must differ from the search seed {options.seed} and "
+                         f"the certification seed {options.certification_seed}")
     for r in relations:
         if r not in RELATIONS:
             raise InputError(f"pixel relation: {r!r} is not one of {', '.join(RELATIONS)}")
@@ -738,7 +819,8 @@ def size(problem: SizingProblem, options: SizingOptions = SizingOptions(),
         rs = size_relation(problem, rel, options)
         a = rs.answer
         if confirm_seed is not None and a is not None:
-            rs.confirmation = confirm(problem, rel, a, trials=options.trials, seed=confirm_seed,
+            rs.confirmation = confirm(problem, rel, a, trials=options.confirm_trials
+                                      or 4 * options.trials, seed=confirm_seed,
                                       block_size=options.block_size, n_jobs=options.n_jobs)
         result.relations[rel] = rs
     return result
@@ -879,14 +961,17 @@ def format_result(result: SizingResult) -> str:
                          else "weighted doublings")
              + f"; grid {o.levels} levels per knob, {o.trials} trials per point, seed {o.seed}, "
              f"bisection to {o.tolerance:.0%}, replication margin "
-             f"{'on' if o.replication_margin else 'off'}"]
+             f"{'on' if o.replication_margin else 'off'}, certification seed "
+             f"{o.certification_seed}"]
     for rel, rs in result.relations.items():
         counts = rs.grid["verdict"].value_counts()
         lines += ["", f"== {RELATION_TEXT[rel]} ==",
                   f"grid: {len(rs.grid)} points: " + ", ".join(
                       f"{counts.get(v, 0)} {v}" for v in ("meets", "undecided", "fails",
                                                           "invalid"))
-                  + f"; {rs.evaluations} evaluations in all"]
+                  + f"; {rs.evaluations} evaluations in all"
+                  + (f"; {rs.uncertified} corner(s) failed certification and were dropped"
+                     if rs.uncertified else "")]
         a = rs.answer
         if a is None:
             best = rs.grid.loc[rs.grid["hi"].fillna(np.inf).idxmin()]
@@ -898,20 +983,22 @@ def format_result(result: SizingResult) -> str:
         lines.append(f"{len(rs.corners)} Pareto-minimal corners; the cheapest:")
         lines.append("  " + ", ".join(f"{n} = {a[n]:.4g}" for n in p.names)
                      + f"  (cost {a['cost']:.3g})")
-        lines.append(f"  {req.statistic} = {_fmt(a['value'])} {result.unit}, "
+        lines.append(f"  certification: {req.statistic} = {_fmt(a['value'])} {result.unit}, "
                      f"{req.confidence:.0%} interval [{_fmt(a['lo'])}, {_fmt(a['hi'])}]: "
-                     f"{a['verdict']}")
+                     f"{a['verdict']} (search seed: {_fmt(a['search_value'])}, upper bound "
+                     f"{_fmt(a['search_hi'])})")
         if isinstance(a["limiting"], str):
             lines.append(f"  limiting parameter: {a['limiting']} (its 10 % cheapening raises "
-                         f"{req.statistic} most; {a['status']}; {a['limiting']} = "
-                         f"{a['bracket_bad']:.4g} does not pass)")
+                         f"{req.statistic} most; {a['status']}; in the search "
+                         f"{a['limiting']} = {a['bracket_bad']:.4g} did not pass)")
         else:
             lines.append(f"  limiting parameter: none ({a['status']})")
         if rs.confirmation is not None:
             for _, c in rs.confirmation.iterrows():
                 what = "at the answer" if c["role"] == "answer" else (
                     f"10 % cheaper, {a['limiting']} = {c[a['limiting']]:.4g}")
-                lines.append(f"  confirmation (seed {c['seed']}) {what}: {req.statistic} = "
+                lines.append(f"  confirmation (seed {c['seed']}, {c['count']} trials) {what}: "
+                             f"{req.statistic} = "
                              f"{_fmt(c['value'])} [{_fmt(c['lo'])}, {_fmt(c['hi'])}] "
                              f"{result.unit}: {c['verdict']}")
     return "\n".join(lines)
