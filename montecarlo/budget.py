@@ -367,7 +367,8 @@ def format_budget(result: BudgetResult) -> str:
     r = result
     t = r.table
     req = r.requirement
-    lines = [f"== {RELATION_TEXT[r.relation]} ==",
+    point = ", ".join(f"{k} = {v:.4g}" for k, v in r.point.items()) or "base study"
+    lines = [f"== {RELATION_TEXT[r.relation]} ==", f"design point: {point}",
              f"design total: {req.statistic} = {r.total['value']:.4g} {r.unit} "
              f"[{r.total['lo']:.4g}, {r.total['hi']:.4g}] vs limit {req.limit:g}: "
              f"{r.total['verdict']}",
@@ -380,7 +381,8 @@ def format_budget(result: BudgetResult) -> str:
             f"{row['share']:>7.3f}{row['allocation']:>8.3g}{row['alone']:>8.3g}  "
             f"{row['alone_verdict']:<15}{row['allowed_scale']:>11.3g} {SOURCE_UNITS[s]}")
     lines.append(f"sum S1 = {t['S1'].sum():.3f}, sum ST = {t['ST'].sum():.3f}; allocation "
-                 f"RSS = {np.sqrt((t['allocation'] ** 2).sum()):.4g} {r.unit}")
+                 f"RSS = {np.sqrt((t['allocation'] ** 2).sum()):.4g} {r.unit}; sources alone "
+                 f"RSS = {np.sqrt((t['alone'] ** 2).sum()):.4g} {r.unit}")
     return "\n".join(lines)
 
 
@@ -401,6 +403,14 @@ def _explain(r: BudgetResult) -> list[str]:
                 "the length of the error vector, not a sum of per-source terms).")]
     lines.append("- Sources whose output alone exceeds their allocation: "
                  + (", ".join(over) if over else "none") + ".")
+    rss = float(np.sqrt((r.table["alone"] ** 2).sum()))
+    lines.append(f"- Root-sum-square of the sources alone: {rss:.3g} {r.unit}, against the "
+                 f"design total {r.total['value']:.3g} {r.unit}.")
+    if r.total["verdict"] != "meets":
+        lines.append(f"- The design does not meet the spec ({r.total['verdict']}): the rule "
+                     "keeps today's proportions, so a dominant source takes nearly the whole "
+                     "limit and the others are squeezed towards zero. Size the design first "
+                     "(`montecarlo size`) and budget at its answer.")
     return lines
 
 
@@ -411,9 +421,8 @@ def render_budget_report(results: Sequence[BudgetResult], figure_name: str = "bu
     req = r0.requirement
     lines = ["# Error budget", "",
              f"Metric: {req.statistic} of `{req.metric}` ({req.variant} solver), limit "
-             f"{req.limit:g} {r0.unit}; design point "
-             + (", ".join(f"{k} = {v:g}" for k, v in r0.point.items()) or "as in the base study")
-             + f". Sobol indices from SALib (Saltelli scheme, N = {r0.samples} base samples, "
+             f"{req.limit:g} {r0.unit}. Sobol indices from SALib (Saltelli scheme, N = "
+             f"{r0.samples} base samples, "
              f"{req.confidence:.0%} bootstrap intervals, seed {r0.seed}); sources alone from the "
              f"study runner ({r0.trials} trials, {req.confidence:.0%} order-statistic intervals).",
              "",
@@ -431,7 +440,9 @@ def render_budget_report(results: Sequence[BudgetResult], figure_name: str = "bu
                 "allocation", "alone", "alone CI", "alone_verdict", "allowed_scale"]
         from montecarlo.report import markdown_table
 
-        lines += [f"## {RELATION_TEXT[r.relation]}", "",
+        point = ", ".join(f"{k} = {v:.4g}" for k, v in r.point.items()) or \
+            "the base study's values"
+        lines += [f"## {RELATION_TEXT[r.relation]}", "", f"Design point: {point}.", "",
                   f"Design total: {req.statistic} = {r.total['value']:.4g} {r.unit}, interval "
                   f"[{r.total['lo']:.4g}, {r.total['hi']:.4g}]: **{r.total['verdict']}**.", "",
                   markdown_table(t[cols]), "", *_explain(r), ""]

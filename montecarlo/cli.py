@@ -372,10 +372,14 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     for n in point:
         if n not in sizing.KNOBS:
             raise InputError(f"--point {n}: unknown knob; choose from {', '.join(sizing.KNOBS)}")
+    if args.from_sizing and point:
+        raise InputError("--from-sizing: give either --point or --from-sizing, not both")
+    points = _sizing_answers(args.from_sizing, args.relations) if args.from_sizing \
+        else dict.fromkeys(args.relations, point)
     req = _requirement(args, spec)
-    results = [budget.budget(base, req, rel, point, samples=args.samples, seed=args.seed,
+    results = [budget.budget(base, req, rel, pt, samples=args.samples, seed=args.seed,
                              trials=args.trials, resamples=args.resamples, n_jobs=args.n_jobs)
-               for rel in args.relations]
+               for rel, pt in points.items()]
     out = Path(args.out)
     budget.write_budget(results, out)
     for r in results:
@@ -383,6 +387,27 @@ def _cmd_budget(args: argparse.Namespace) -> int:
         print()
     print(f"written to {out}/ (report.md, budget.png, budget-*.csv)")
     return 0
+
+
+def _sizing_answers(path: str, relations: Sequence[str]) -> dict[str, dict[str, float]]:
+    """Each relation's answer (knob -> value) from a sizing run's answers.csv."""
+    from montecarlo.csvio import read_table
+    from montecarlo.sizing import KNOBS, RELATIONS
+
+    table = read_table(path, (), text=("pixel_relation",), choices={"pixel_relation": RELATIONS})
+    knobs = [c for c in table.columns if c in KNOBS]
+    points = {}
+    for row, (_, r) in enumerate(table.iterrows(), start=2):
+        rel = r["pixel_relation"]
+        if rel not in relations:
+            continue
+        if all(str(r[k]).strip() == "" for k in knobs):
+            raise InputError(f"{path}: row {row}: no answer for pixel relation {rel!r} "
+                             f"(nothing met the spec); leave it out with --relations")
+        points[rel] = {k: _float_of(f"{path}: row {row}: column", k, r[k]) for k in knobs}
+    if not points:
+        raise InputError(f"{path}: no row for pixel relation(s) {', '.join(relations)}")
+    return points
 
 
 def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
@@ -434,6 +459,8 @@ def _add_sizing_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--point", action="append", type=_knob_assignment, default=[],
                    metavar="KNOB=VALUE", help="design point as sizing knobs (repeatable), e.g. "
                    "L_m=50 H_m=5 pixel_px=0.2; default: the base study's values")
+    p.add_argument("--from-sizing", metavar="ANSWERS.csv",
+                   help="take each relation's design point from a sizing run's answers.csv")
     p.add_argument("--samples", type=_positive_int, default=8192,
                    help="Sobol base sample size, a power of 2 (default 8192)")
     p.add_argument("--resamples", type=_positive_int, default=200,

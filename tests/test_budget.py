@@ -188,3 +188,23 @@ def test_bootstrap_level_is_the_requested_one():
     lo = bg.sobol_indices(problem, model, 256, rng=1, confidence=stats.norm.cdf(1) * 2 - 1)
     hi = bg.sobol_indices(problem, model, 256, rng=1, confidence=stats.norm.cdf(2) * 2 - 1)
     np.testing.assert_allclose(hi["S1_conf"], 2 * lo["S1_conf"], rtol=1e-9)
+
+
+def test_cli_budget_from_sizing_answers(tmp_path, capsys):
+    from montecarlo.cli import main
+
+    answers = tmp_path / "answers.csv"
+    answers.write_text("pixel_relation,L_m,pixel_px,value,status\n"
+                       "common,60.0,0.25,2.9,ok\nindependent,,,,no design meets\n")
+    out = tmp_path / "b"
+    common = ["budget", "--limit", "3", "--samples", "128", "--trials", "500", "--n-jobs", "1",
+              "--from-sizing", str(answers), "--out", str(out)]
+    assert main([*common, "--relations", "common"]) == 0
+    assert "design point: L_m = 60, pixel_px = 0.25" in capsys.readouterr().out
+    assert main(common) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {answers}: row 3: no answer for pixel relation 'independent' "
+                   "(nothing met the spec); leave it out with --relations"]
+    answers.write_text("pixel_relation,L_m\ncommon,abc\n")
+    assert main([*common, "--relations", "common"]) == 2
+    assert f"{answers}: row 2: column L_m: not a number: 'abc'" in capsys.readouterr().err
