@@ -54,6 +54,7 @@ from montecarlo.sizing import (
     ground_study,
     run_statistic,
     verdicts,
+    write_file,
 )
 
 SOURCE_LABELS = {
@@ -452,16 +453,11 @@ def render_budget_report(results: Sequence[BudgetResult], figure_name: str = "bu
 
 def write_budget(results: Sequence[BudgetResult], out_dir: Path) -> list[Path]:
     """budget-<relation>.csv, budget.png and report.md, each written atomically."""
-    from montecarlo.runner import atomic_write_bytes
-
     out_dir = Path(out_dir)
-    written = []
-    for r in results:
-        path = out_dir / f"budget-{r.relation}.csv"
-        atomic_write_bytes(path, r.table.to_csv().encode())
-        written.append(path)
+    written = [write_file(out_dir / f"budget-{r.relation}.csv", r.table.to_csv().encode())
+               for r in results]
     buf = io.BytesIO()
     budget_figure(results).savefig(buf, format="png", dpi=90)
-    atomic_write_bytes(out_dir / "budget.png", buf.getvalue())
-    atomic_write_bytes(out_dir / "report.md", render_budget_report(results).encode())
-    return [*written, out_dir / "budget.png", out_dir / "report.md"]
+    written.append(write_file(out_dir / "budget.png", buf.getvalue()))
+    written.append(write_file(out_dir / "report.md", render_budget_report(results).encode()))
+    return written

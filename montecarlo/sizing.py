@@ -857,7 +857,9 @@ def _plot_slice(ax: Any, problem: SizingProblem, rs: RelationSizing, unit: str) 
         return
     others = [n for n in problem.names if n not in {k.name for k in axes}]
     fixed = ", ".join(f"{n}={sl[n].iloc[0]:.3g}" for n in others)
-    title = RELATION_TEXT[rs.relation].split(" (")[0] + (f"\nslice at {fixed}" if fixed else "")
+    where = "through the answer" if a is not None else "through the best grid point (no answer)"
+    title = RELATION_TEXT[rs.relation].split(" (")[0] + f"\nslice {where}" + (
+        f" at {fixed}" if fixed else "")
     if len(axes) == 1:
         k = axes[0]
         sel = sl.sort_values(k.name)
@@ -901,7 +903,8 @@ def _plot_slice(ax: Any, problem: SizingProblem, rs: RelationSizing, unit: str) 
         ax.set_ylabel(f"{KNOBS[yk.name].label} (cheaper: {yk.info.cheaper})")
         ax.grid(alpha=0.3)
     ax.set_title(title, fontsize=8)
-    ax.legend(fontsize=6, loc="best")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncols=3,
+              frameon=False)
 
 
 def _plot_corners(ax: Any, problem: SizingProblem, rs: RelationSizing) -> None:
@@ -1036,17 +1039,28 @@ def render_report(result: SizingResult, figure_name: str = "frontier.png") -> st
     return "\n".join(lines)
 
 
+def write_file(path: Path, data: bytes) -> Path:
+    """Write under a temporary name, rename, and give the file the usual umask permissions
+    (the temporary file is private)."""
+    import os
+
+    from montecarlo.runner import atomic_write_bytes
+
+    atomic_write_bytes(path, data)
+    umask = os.umask(0)
+    os.umask(umask)
+    path.chmod(0o666 & ~umask)
+    return path
+
+
 def write_outputs(result: SizingResult, out_dir: Path) -> list[Path]:
     """grid-<relation>.csv, corners-<relation>.csv, answers.csv, frontier.png, report.md; each
     file written under a temporary name and renamed."""
-    from montecarlo.runner import atomic_write_bytes
-
     out_dir = Path(out_dir)
     written = []
 
     def put(name: str, data: bytes) -> None:
-        atomic_write_bytes(out_dir / name, data)
-        written.append(out_dir / name)
+        written.append(write_file(out_dir / name, data))
 
     for rel, rs in result.relations.items():
         put(f"grid-{rel}.csv", rs.grid.to_csv(index=False).encode())
