@@ -47,6 +47,7 @@ from montecarlo import ground
 from montecarlo.distributions import Distribution
 from montecarlo.exceptions import InputError
 from montecarlo.ground_study import MOUNTING_SOURCES, PLACEMENT_SOURCES, PreparedGround
+from montecarlo.report import markdown_table
 from montecarlo.sizing import (
     RELATION_TEXT,
     Requirement,
@@ -230,12 +231,12 @@ def allocate(total_order: pd.Series, limit: float) -> pd.DataFrame:
 def _describe_source(raw: Mapping[str, Any], unit: str) -> str:
     match raw.get("dist"):
         case "uniform":
-            return f"uniform ±{raw['bound']:g} {unit}"
+            return f"uniform ±{raw['bound']:.3g} {unit}"
         case "normal":
-            return f"normal σ {raw['sigma']:g} {unit}"
+            return f"normal σ {raw['sigma']:.3g} {unit}"
         case "corners":
-            return f"corners ±{raw['bound']:g} {unit}"
-    return f"fixed {raw.get('value', 0.0):g} {unit}"
+            return f"corners ±{raw['bound']:.3g} {unit}"
+    return f"fixed {raw.get('value', 0.0):.3g} {unit}"
 
 
 def _scale_of(raw: Mapping[str, Any]) -> float:
@@ -439,8 +440,6 @@ def render_budget_report(results: Sequence[BudgetResult], figure_name: str = "bu
                                                                 strict=True)]
         cols = ["source", "label", "distribution", "S1", "S1_conf", "ST", "ST_conf", "share",
                 "allocation", "alone", "alone CI", "alone_verdict", "allowed_scale"]
-        from montecarlo.report import markdown_table
-
         point = ", ".join(f"{k} = {v:.4g}" for k, v in r.point.items()) or \
             "the base study's values"
         lines += [f"## {RELATION_TEXT[r.relation]}", "", f"Design point: {point}.", "",

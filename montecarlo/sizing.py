@@ -71,6 +71,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from montecarlo.exceptions import InputError
+from montecarlo.report import markdown_table
 from montecarlo.runner import RunOptions, run_study
 from montecarlo.study import study_from_dict
 
@@ -1007,12 +1008,6 @@ def format_result(result: SizingResult) -> str:
     return "\n".join(lines)
 
 
-def _markdown_table(frame: pd.DataFrame) -> str:
-    from montecarlo.report import markdown_table
-
-    return markdown_table(frame)
-
-
 def render_report(result: SizingResult, figure_name: str = "frontier.png") -> str:
     """Markdown report: requirement, method, answers with confirmation, corners, plot."""
     p, o = result.problem, result.options
@@ -1024,17 +1019,20 @@ def render_report(result: SizingResult, figure_name: str = "frontier.png") -> st
     lines += [f"- `{k.name}` ({KNOBS[k.name].label}): {k.lo:g} .. {k.hi:g}, cheaper "
               f"{k.info.cheaper}, weight {k.weight:g}" for k in p.knobs]
     lines += ["", f"Search: {o.levels} geometric levels per knob, {o.trials} trials per point, "
-              f"seed {o.seed}, common random numbers; Pareto-minimal meeting grid points "
-              f"bisected along their limiting knob to {o.tolerance:.0%}; replication margin "
-              f"{'on' if o.replication_margin else 'off'}; cost "
+              f"seed {o.seed}, common random numbers; every Pareto-minimal meeting grid point "
+              f"bisected knob by knob to {o.tolerance:.0%}; limiting knob = the one whose 10 % "
+              f"cheapening raises {req.statistic} most; replication margin "
+              f"{'on' if o.replication_margin else 'off'}; every corner re-evaluated (certified) "
+              f"with seed {o.certification_seed}; answers confirmed with an independent seed at "
+              f"{o.confirm_trials or 4 * o.trials} trials; cost "
               + (f"lexicographic in {', '.join(o.order)}" if o.order else "weighted doublings")
               + ".", "", "## Answers", "", "```", format_result(result), "```", ""]
     for rel, rs in result.relations.items():
         lines += [f"## {RELATION_TEXT[rel]}", ""]
         if len(rs.corners):
-            lines += [_markdown_table(rs.corners[[*cols, "cheapest"]]), ""]
+            lines += [markdown_table(rs.corners[[*cols, "cheapest"]]), ""]
         else:
-            lines += ["No grid point meets the spec.", ""]
+            lines += ["No design within the bounds meets the spec (after certification).", ""]
     lines += [f"![frontier]({figure_name})", ""]
     return "\n".join(lines)
 
