@@ -445,10 +445,13 @@ class RelationSizing:
         Every grid point: knob values, ``steps_<knob>`` (levels from the cheap end), value, lo,
         hi, count, invalid, verdict, margin_ok, cost, pareto.
     corners : DataFrame
-        Refined Pareto-minimal corners: knob values, statistic, bounds, verdict, cost,
-        ``limiting`` knob (None if every knob is at its cheap bound), ``bracket_bad`` (the
-        cheaper end of the final bisection bracket, which does not meet), ``status``, and
-        ``cheapest`` (True for the answer).
+        Refined, certified Pareto-minimal corners: knob values; value, lo, hi, count, invalid,
+        verdict of the certification run (``search_value``, ``search_hi``: the search seed's);
+        ``limiting`` knob (None if every knob is at its cheap bound); ``refined`` knobs and
+        ``bad_<knob>``, the cheaper end of each final bisection bracket (did not pass in the
+        search); ``cheaper_<knob>``, the statistic 10 % cheaper in that knob; ``bracket_bad``
+        (``bad_`` of the limiting knob); ``grid_index`` of the originating grid corner;
+        ``status``; ``cost``; ``cheapest`` (True for the answer).
     confirmation : DataFrame or None
         Independent runs at the answer and at a point 10 % cheaper in its limiting knob.
     """
