@@ -19,6 +19,7 @@ Where too few trials exist for an interval end, it is NaN: more trials are neede
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -88,6 +89,7 @@ ABS_UPPER = np.concatenate([MAG_EDGES, [np.inf]])
 """Edges of every bin of the magnitude histogram of :func:`abs_histogram`."""
 
 
+@functools.lru_cache(maxsize=4096)
 def order_statistic_ranks(n: int, p: float, confidence: float) -> tuple[int, int, int]:
     """1-based ranks (estimate, lower, upper) for the p-quantile of n trials.
 

@@ -187,7 +187,7 @@ def _non_negative(text: str) -> float:
 def _write_text_atomic(path: str, text: str) -> None:
     from pathlib import Path
 
-    from montecarlo.runner import atomic_write_bytes
+    from montecarlo.files import atomic_write_bytes
 
     atomic_write_bytes(Path(path), text.encode())
 

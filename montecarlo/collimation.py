@@ -42,8 +42,6 @@ photoelectric target calibration", section 2 (Figs. 2-6) and section 3.1 (mirror
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,6 +52,7 @@ from scipy.optimize import least_squares
 
 from montecarlo.csvio import read_table
 from montecarlo.exceptions import InputError
+from montecarlo.files import atomic_write_bytes
 from montecarlo.rotations import euler_zxy_from_matrix, mounting_matrix
 
 FloatArray = NDArray[np.float64]
@@ -581,10 +580,7 @@ def write_readings(path: str | Path, mirror: Sequence[str], sets: Sequence[str],
     lines = [",".join(["mirror", "set", *(c for c, _ in cols)])]
     for i, (name, kind) in enumerate(zip(mirror, sets, strict=True)):
         lines.append(",".join([name, kind, *(f"{v[i]:.9f}" for v in values)]))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
 
 
 # --------------------------------------------------------------------------- Figs. 3-6

@@ -320,7 +320,7 @@ def write_report(outdir: str | Path, d: dia.Diagnosis, view: SystemView,
 
     Every file is written under a temporary name and renamed.
     """
-    from montecarlo.runner import atomic_write_bytes
+    from montecarlo.files import atomic_write_bytes
 
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)

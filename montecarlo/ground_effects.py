@@ -236,7 +236,7 @@ def read_ground_csv(path: str | Path, camera: Camera) -> GroundData:
 
 def write_ground_csv(path: str | Path, data: GroundData) -> None:
     """Write observations as a ground data CSV (temporary name, then rename)."""
-    from montecarlo.runner import atomic_write_bytes
+    from montecarlo.files import atomic_write_bytes
 
     cols = ["target", "x_m", "y_m", "z_m", "px", "pz"]
     if data.t is not None:

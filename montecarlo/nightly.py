@@ -24,10 +24,11 @@ import numpy as np
 import pandas as pd
 
 from montecarlo import __version__
+from montecarlo.files import atomic_write_bytes
 from montecarlo.outputs import write_outputs
 from montecarlo.provenance import git_commit
 from montecarlo.report import markdown_table
-from montecarlo.runner import Checkpoints, RunOptions, atomic_write_bytes, run_study
+from montecarlo.runner import Checkpoints, RunOptions, run_study
 from montecarlo.study import load_study
 from montecarlo.table1 import TABLE1_ROWS
 

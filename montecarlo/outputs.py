@@ -14,10 +14,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from montecarlo.files import with_umask
 from montecarlo.plots import all_figures
 from montecarlo.provenance import provenance
 from montecarlo.report import render_report
-from montecarlo.runner import RunOptions, StudyResult, with_umask
+from montecarlo.runner import RunOptions, StudyResult
 
 
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions) -> Path:

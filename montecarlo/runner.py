@@ -17,11 +17,9 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import pickle
 import shutil
 import sys
-import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +33,7 @@ from tqdm import tqdm
 from montecarlo import __version__
 from montecarlo.aggregate import VALUE_COLUMNS, PointResult, PointStats
 from montecarlo.exceptions import InputError
+from montecarlo.files import atomic_write_bytes
 from montecarlo.study import Study
 from montecarlo.tasks import PointTask, run_task
 
@@ -122,28 +121,6 @@ def _chunk_blocks(study: Study, points: list[int], options: RunOptions) -> int:
     return min(MAX_CHUNK_BLOCKS, max(1, math.ceil(total_blocks / (4 * options.n_jobs))))
 
 
-def with_umask(mode: int) -> int:
-    """``mode`` as the process's umask would leave it for a newly created file."""
-    umask = os.umask(0)
-    os.umask(umask)
-    return mode & ~umask
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write a file under a temporary name in the same directory, then rename it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, with_umask(0o666))  # mkstemp makes it private; results are shared
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
 CHECKPOINT_FORMAT = 1
 
 
@@ -171,6 +148,7 @@ class Checkpoints:
         return loaded if ok else None
 
     def save(self, point: int, result: PointResult, trials: dict) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(self._file(point), pickle.dumps((result, trials)))
 
     def remove(self) -> None:

@@ -1041,16 +1041,10 @@ def render_report(result: SizingResult, figure_name: str = "frontier.png") -> st
 
 
 def write_file(path: Path, data: bytes) -> Path:
-    """Write under a temporary name, rename, and give the file the usual umask permissions
-    (the temporary file is private)."""
-    import os
-
-    from montecarlo.runner import atomic_write_bytes
+    """Write all or nothing (montecarlo.files) and return the path."""
+    from montecarlo.files import atomic_write_bytes
 
     atomic_write_bytes(path, data)
-    umask = os.umask(0)
-    os.umask(umask)
-    path.chmod(0o666 & ~umask)
     return path
 
 
@@ -1058,6 +1052,7 @@ def write_outputs(result: SizingResult, out_dir: Path) -> list[Path]:
     """grid-<relation>.csv, corners-<relation>.csv, answers.csv, frontier.png, report.md; each
     file written under a temporary name and renamed."""
     out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
     written = []
 
     def put(name: str, data: bytes) -> None:

@@ -43,8 +43,7 @@ seed 001: patent CN102288133B (2013), eqs. (1)-(6); NOTES.md, "Seed 001 - cautio
 
 from __future__ import annotations
 
-import os
-import tempfile
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,6 +54,7 @@ from scipy.integrate import cumulative_trapezoid
 from montecarlo.camera import Camera, pixels_from_direction
 from montecarlo.csvio import read_table
 from montecarlo.exceptions import InputError
+from montecarlo.files import atomic_write_bytes
 from montecarlo.rotations import mounting_matrix
 
 FloatArray = NDArray[np.float64]
@@ -759,18 +759,13 @@ def write_csv(path: str | Path, record: Record) -> None:
     """
     path = Path(path)
     columns = np.column_stack([record.t, record.gyro, record.eta, record.eps, record.los_px])
+    text = io.StringIO()
+    text.write(",".join(CSV_COLUMNS) + "\n")
+    np.savetxt(text, columns, fmt="%.12g", delimiter=",")
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        atomic_write_bytes(path, text.getvalue().encode())
     except OSError as exc:
         raise InputError(f"{path}: cannot write ({exc.strerror})") from None
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(",".join(CSV_COLUMNS) + "\n")
-            np.savetxt(f, columns, fmt="%.12g", delimiter=",")
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def read_csv(path: str | Path) -> Record:
