@@ -13,7 +13,7 @@ draws depend on which block of trials it belongs to, never on which worker or ta
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -69,6 +69,9 @@ def source_key(name: str) -> int:
 class Streams:
     """Random streams of one block of trials.
 
+    Each source has one stream per block; successive draws from a source continue its stream,
+    so a block may be drawn in pieces and equal the same block drawn at once.
+
     Parameters
     ----------
     seed : int
@@ -85,30 +88,39 @@ class Streams:
     point: int
     block: int
     common: bool = True
+    _generators: dict[str, np.random.Generator] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
 
     def generator(self, source: str) -> np.random.Generator:
-        """The generator of one source in this block."""
-        key = (self.block, source_key(source))
-        if not self.common:
-            key = (self.point, *key)
-        seq = np.random.SeedSequence(self.seed, spawn_key=key)
-        return np.random.Generator(np.random.PCG64(seq))
+        """The generator of one source in this block (created on first use, then continued)."""
+        gen = self._generators.get(source)
+        if gen is None:
+            key = (self.block, source_key(source))
+            if not self.common:
+                key = (self.point, *key)
+            seq = np.random.SeedSequence(self.seed, spawn_key=key)
+            gen = self._generators[source] = np.random.Generator(np.random.PCG64(seq))
+        return gen
 
-    def fill(self, dist: Distribution, source: str, out: np.ndarray) -> np.ndarray:
-        """Fill ``out`` with draws of a random source, in its own units.
+    def fill_unit(self, dist: Distribution, source: str, out: np.ndarray) -> tuple[float, float]:
+        """Fill ``out`` with unit draws of a random source; return (a, b), its affine map.
 
-        Uniform: ``2 scale U + (location - scale)`` for U ~ U[0, 1) (two passes; the same as
-        ``location + scale (2 U - 1)`` up to rounding). Normal: ``location + scale Z``.
+        The draws in the source's units are ``a * out + b``: for a uniform source U[0, 1) with
+        ``a = 2 scale``, ``b = location - scale``; for a normal source N(0, 1) with
+        ``a = scale``, ``b = location``.
         """
         gen = self.generator(source)
         if dist.kind == "uniform":
             gen.random(out=out)
-            out *= 2.0 * dist.scale
-            out += dist.location - dist.scale
-        else:
-            gen.standard_normal(out=out)
-            out *= dist.scale
-            out += dist.location
+            return 2.0 * dist.scale, dist.location - dist.scale
+        gen.standard_normal(out=out)
+        return dist.scale, dist.location
+
+    def fill(self, dist: Distribution, source: str, out: np.ndarray) -> np.ndarray:
+        """Fill ``out`` with draws of a random source, in its own units."""
+        a, b = self.fill_unit(dist, source, out)
+        out *= a
+        out += b
         return out
 
 
@@ -118,6 +130,8 @@ def corner_signs(first_trial: int, n: int, n_corners: int) -> np.ndarray:
     Trial ``t`` sits at corner ``t mod 2**n_corners``: bit ``j`` of that number (0 -> -1, 1 -> +1)
     is the sign of corner source ``j``. Returns shape (n_corners, n).
     """
+    if n_corners == 0:
+        return np.empty((0, n))
     corner = (np.arange(first_trial, first_trial + n) % (1 << n_corners)).astype(np.int64)
     bits = (corner[None, :] >> np.arange(n_corners)[:, None]) & 1
     return 2.0 * bits - 1.0

@@ -152,29 +152,21 @@ def _pixel_corner_names(relation: str | float) -> tuple[str, ...]:
     return ("pixel_a_x", "pixel_a_z", "pixel_b_x", "pixel_b_z")
 
 
-@functools.lru_cache(maxsize=16)
-def _repeated_matrix(elements: tuple[float, ...]) -> np.ndarray:
-    """A fixed C_b^a as (9, SUB_CHUNK) rows for the kernel (read-only, cached per process)."""
-    from montecarlo import ground_kernel as gk
-
-    C = np.repeat(np.array(elements).reshape(9, 1), gk.SUB_CHUNK, axis=1)
-    C.flags.writeable = False
-    return C
-
-
-METRIC_ORDER = ("rotation_angle", "eq18_angle", "table1_angle", "delta_psi", "delta_theta",
-                "delta_gamma")
-"""The metrics per solver variant, in the order of the fast kernel's rows."""
+@functools.lru_cache(maxsize=2)
+def _draw_buffers(n: int) -> np.ndarray:
+    """Draw buffers of one block for the fast path, reused by every block of a process."""
+    return np.empty((9, n))
 
 
 @functools.lru_cache(maxsize=4)
-def _scratch(m: int, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Work buffers of the fast kernel for m trials, reused for every block of a process
-    (fresh megabyte-sized buffers would cost a page fault per 4 KB each time)."""
+def _scratch(m: int) -> tuple[np.ndarray, ...]:
+    """Work buffers of the fast kernel for m trials (flags, fields, bins, the kernel's view of
+    fields), reused for every block of a process: fresh megabyte-sized buffers would cost a
+    page fault per 4 KB each time."""
     from montecarlo import ground_kernel as gk
 
-    return (np.empty((2, m), np.uint16), np.empty((2 * gk.N_FIELDS, m)), np.empty((rows, m)),
-            np.empty(m, np.int64))
+    fields = np.empty((2 * gk.N_FIELDS, m))
+    return np.empty((2, m), np.uint16), fields, np.empty(m, np.int32), gk.output_rows(fields)
 
 
 class GroundSystem:
@@ -215,49 +207,70 @@ class GroundSystem:
                                             prepared.pixel))
         return requested if random else 1 << len(prepared.corners)
 
-    @staticmethod
-    def _fill(p: PreparedGround, name: str, dist: Distribution, streams: Streams,
-              signs: np.ndarray, out: np.ndarray) -> None:
-        """Values of one scalar source for a block of trials, in place."""
-        if dist.is_corner:
-            out[...] = dist.from_standard(signs[p.corners.index(name)])
-        elif dist.is_random:
-            streams.fill(dist, name, out)
-        else:
-            out[...] = dist.location
+    def unit_draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int,
+                   buffers: np.ndarray | None = None
+                   ) -> tuple[tuple[np.ndarray | float, ...], list[np.ndarray], np.ndarray]:
+        """The trials of a block as unit draws and their affine maps.
 
-    def draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int
-              ) -> tuple[tuple[np.ndarray | float, ...], np.ndarray]:
-        """True mounting angles [rad] and the error rows of a block of trials.
+        ``buffers`` (9, n), if given, holds the draws (reused between blocks by the fast path).
 
         Returns
         -------
-        true : (psi, theta, gamma), floats if fixed, else arrays of shape (n,)
-        errors : (8, n) rows dx, dy, dh1, dh [m], then the pixel errors of A (x, z) and of
-            B (x, z) [px].
+        true : (psi, theta, gamma) [rad], floats if fixed, else arrays of shape (n,)
+        rows : 8 arrays of shape (n,): unit draws (U[0, 1), N(0, 1) or corner signs) of dx,
+            dy, dh1, dh, then of the pixel errors of A (x, z) and of B (x, z). Rows may be
+            shared (B's are A's for a common pixel error).
+        affine : (2, 8): row k in its units [m] or [px] is ``affine[0, k] * rows[k] +
+            affine[1, k]``.
         """
         signs = corner_signs(first_trial, n, len(p.corners))
+        free = iter(np.empty((9, n)) if buffers is None else buffers)
+        zeros = next(free)
+        zeros[...] = 0.0
+
+        def unit(name: str, dist: Distribution) -> tuple[np.ndarray, float, float]:
+            if dist.is_corner:
+                return signs[p.corners.index(name)], dist.scale, dist.location
+            if dist.is_random:
+                u = next(free)
+                return (u, *streams.fill_unit(dist, name, u))
+            return zeros, 0.0, dist.location
+
         true: list[np.ndarray | float] = []
         for name, dist in zip(MOUNTING_SOURCES, p.mounting, strict=True):
             if dist.is_corner or dist.is_random:
-                true.append(np.empty(n))
-                self._fill(p, name, dist, streams, signs, true[-1])
+                u = signs[p.corners.index(name)] if dist.is_corner else \
+                    streams.fill(dist, name, np.empty(n))
+                true.append(dist.location + dist.scale * u if dist.is_corner else u)
             else:
                 true.append(dist.location)
-        errors = np.empty((8, n))
-        for row, (name, dist) in enumerate(p.placement.items()):
-            self._fill(p, name, dist, streams, signs, errors[row])
-        pix = errors[4:]
-        if p.pixel.is_corner:
+        cols = [unit(name, dist) for name, dist in p.placement.items()]
+        px = p.pixel
+        if px.is_corner:
             names = _pixel_corner_names(p.relation)
-            rows = [signs[p.corners.index(k)] for k in names]
-            pix[...] = p.pixel.from_standard(np.stack(rows if len(rows) == 4 else rows * 2))
-        elif p.pixel.is_random:
-            fill_pair(p.pixel, p.relation, streams, "pixel_x", pix[0], pix[2])
-            fill_pair(p.pixel, p.relation, streams, "pixel_z", pix[1], pix[3])
+            pix = [(signs[p.corners.index(k)], px.scale, px.location) for k in names]
+            cols += pix if len(pix) == 4 else pix * 2
+        elif px.is_random and p.relation in ("common", "independent", 0.0, 1.0):
+            pix_a = [unit("pixel_x:a", px), unit("pixel_z:a", px)]
+            cols += pix_a + (pix_a if p.relation in ("common", 1.0)
+                             else [unit("pixel_x:b", px), unit("pixel_z:b", px)])
+        elif px.is_random:  # correlated: values through the copula of fill_pair
+            vals = np.empty((4, n))
+            fill_pair(px, p.relation, streams, "pixel_x", vals[0], vals[2])
+            fill_pair(px, p.relation, streams, "pixel_z", vals[1], vals[3])
+            cols += [(v, 1.0, 0.0) for v in vals]
         else:
-            pix[...] = p.pixel.location
-        return tuple(true), errors
+            cols += [(zeros, 0.0, px.location)] * 4
+        rows = [c[0] for c in cols]
+        affine = np.array([[c[1] for c in cols], [c[2] for c in cols]])
+        return tuple(true), rows, affine
+
+    def draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int
+              ) -> tuple[tuple[np.ndarray | float, ...], np.ndarray]:
+        """True mounting angles [rad] and the errors of a block: (8, n) rows dx, dy, dh1, dh
+        [m], then the pixel errors of A (x, z) and of B (x, z) [px]."""
+        true, rows, affine = self.unit_draws(p, streams, first_trial, n)
+        return true, affine[0][:, None] * np.stack(rows) + affine[1][:, None]
 
     def simulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
                        n: int) -> tuple[BlockValues, BlockInvalid]:
@@ -281,40 +294,41 @@ class GroundSystem:
         from montecarlo import ground_kernel as gk  # numba: loaded only where kernels run
 
         p = prepared
-        true, e = self.draws(p, streams, first_trial, n)
-        variants = [v for v in SOLVERS if v in p.variants]
-        keys = [(v, m) for v in variants for m in METRIC_ORDER]
+        keys = [(SOLVERS[v], m) for v, m in gk.VALUE_ROWS]  # both variants are computed
         if stats.hist_matrix is None:
             stats.hist_matrix = np.zeros((len(keys), agg.N_BINS), np.int64)
             for r, key in enumerate(keys):
-                stats.metrics[key] = agg.MetricStats(hist=stats.hist_matrix[r])
-        if all(isinstance(a, float) for a in true):
-            C = _repeated_matrix(tuple(mounting_matrix(*true).ravel()))
-        else:
-            C = np.ascontiguousarray(mounting_matrix(*true).reshape(n, 9).T)
+                if key[0] in p.variants:
+                    stats.metrics[key] = agg.MetricStats(hist=stats.hist_matrix[r])
         cam = p.camera
         acc = gk.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
+        true, rows, affine = self.unit_draws(p, streams, first_trial, n, _draw_buffers(n))
+        fixed = all(isinstance(a, float) for a in true)
+        C = mounting_matrix(*true).reshape(9) if fixed else \
+            np.ascontiguousarray(mounting_matrix(*true).reshape(n, 9).T)
         for s in range(0, n, gk.SUB_CHUNK):
             m = min(gk.SUB_CHUNK, n - s)
-            flags, fields, values, bins = _scratch(m, len(keys))
-            gk.solve_chunk(C[:, :m] if C.shape[1] == gk.SUB_CHUNK else C[:, s:s + m],
-                           p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
-                           cam.n_z / 2.0, e[:, s:s + m], flags, fields)
-            for j, v in enumerate(variants):
-                i = SOLVERS.index(v)
-                gk.metrics_from_fields(fields[i * gk.N_FIELDS:(i + 1) * gk.N_FIELDS],
-                                       values[6 * j:6 * j + 6])
-                flag_counts[i] += np.bincount(flags[i], minlength=256)
-            gk.accumulate(values, stats.hist_matrix, acc, bins)
+            flags, fields, bins, out_rows = _scratch(m)
+            gk.solve_chunk(C if fixed else C[:, s:s + m], p.L, p.H, float(cam.k_x),
+                           float(cam.k_z), cam.n_x / 2.0, cam.n_z / 2.0,
+                           [r[s:s + m] for r in rows], affine, flags, fields, out_rows)
+            gk.metrics_in_place(fields)
+            for i in range(2):
+                if flags[i].any():
+                    flag_counts[i] += np.bincount(flags[i], minlength=256)
+            gk.accumulate(fields, gk.METRIC_ROWS, stats.hist_matrix, acc, bins)
         for r, key in enumerate(keys):
+            if key not in stats.metrics:
+                continue  # a variant the study does not ask for
             count, mean, m2, lo, hi = acc[r]
             ms = stats.metrics[key]
             ms.blocks[block] = (int(count), float(mean), float(m2)) if count else (0, 0.0, 0.0)
             ms.minimum = min(ms.minimum, float(lo))
             ms.maximum = max(ms.maximum, float(hi))
-        for v in variants:
-            stats._add_invalid({v: reason_counts(flag_counts[SOLVERS.index(v)])})
+        for i, v in enumerate(SOLVERS):
+            if v in p.variants:
+                stats._add_invalid({v: reason_counts(flag_counts[i])})
         stats.blocks.add(block)
 
     def describe(self, prepared: PreparedGround) -> list[str]:

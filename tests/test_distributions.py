@@ -65,10 +65,9 @@ def test_correlated_pair_has_the_requested_correlation_and_marginals(kind, rho):
 
 def test_relation_limits_and_common_a_draws():
     dist = Distribution("uniform", 0.0, 1.0)
-    s = Streams(5, 0, 0)
-    a1, b1 = correlated_pair(dist, "common", s, "p", 1000)
-    a0, b0 = correlated_pair(dist, "independent", s, "p", 1000)
-    a5, _ = correlated_pair(dist, 0.5, s, "p", 1000)
+    a1, b1 = correlated_pair(dist, "common", Streams(5, 0, 0), "p", 1000)
+    a0, b0 = correlated_pair(dist, "independent", Streams(5, 0, 0), "p", 1000)
+    a5, _ = correlated_pair(dist, 0.5, Streams(5, 0, 0), "p", 1000)
     assert np.array_equal(a1, b1)
     assert np.array_equal(a1, a0) and np.array_equal(a1, a5)  # A's draws never change
     assert not np.array_equal(a0, b0)

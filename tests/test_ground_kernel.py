@@ -35,16 +35,15 @@ def _tolerance(metric, value, rotation):
 
 def _kernel(camera, true, L, H, e):
     n = e.shape[1]
-    C = np.broadcast_to(mounting_matrix(*true).reshape(-1, 9).T, (9, n)).copy()
+    C = mounting_matrix(*true).reshape(-1, 9).T.copy()
+    C = C[:, 0].copy() if C.shape[1] == 1 else C  # one matrix (9,) or one per trial (9, n)
     flags = np.empty((2, n), np.uint16)
     fields = np.empty((2 * gk.N_FIELDS, n))
+    identity = np.array([np.ones(8), np.zeros(8)])  # the errors given as they are
     gk.solve_chunk(C, L, H, float(camera.k_x), float(camera.k_z), camera.n_x / 2,
-                   camera.n_z / 2, e, flags, fields)
-    values = np.empty((12, n))
-    for v in range(2):
-        gk.metrics_from_fields(fields[v * gk.N_FIELDS:(v + 1) * gk.N_FIELDS],
-                               values[6 * v:6 * v + 6])
-    return flags, values
+                   camera.n_z / 2, list(e), identity, flags, fields)
+    gk.metrics_in_place(fields)
+    return flags, fields[gk.METRIC_ROWS]
 
 
 def _compare(camera, true, L, H, e):
@@ -55,8 +54,10 @@ def _compare(camera, true, L, H, e):
         np.testing.assert_array_equal(flags[v], sols[name].invalid)
         ref = ground.solution_metrics(sols[name], true)
         rot = ref["rotation_angle"]
-        for k, metric in enumerate(gk.METRIC_ORDER):
-            got = values[6 * v + k]
+        for row, (variant, metric) in enumerate(gk.VALUE_ROWS):
+            if variant != v:
+                continue
+            got = values[row]
             np.testing.assert_array_equal(np.isnan(got), np.isnan(ref[metric]))
             ok = ~np.isnan(got)
             diff = np.abs(got - ref[metric])[ok]
@@ -105,7 +106,7 @@ def test_accumulate_equals_reference_aggregation():
     stats = gk.new_stats(3)
     for s in range(0, 20000, 8192):
         chunk = np.ascontiguousarray(values[:, s:s + 8192])
-        gk.accumulate(chunk, hist, stats, np.empty(chunk.shape[1], np.int64))
+        gk.accumulate(chunk, np.arange(3), hist, stats, np.empty(chunk.shape[1], np.int64))
     for r in range(3):
         ref = agg.MetricStats()
         ref.add_block(0, values[r])
@@ -153,3 +154,28 @@ def test_runner_fast_path_agrees_with_reference_path(tmp_path):
     pd.testing.assert_frame_equal(a[counts], b[counts])
     for col in agg.VALUE_COLUMNS:
         np.testing.assert_allclose(a[col], b[col], rtol=1e-9, atol=1e-12, err_msg=col)
+
+
+@pytest.mark.parametrize("relation", ["common", "independent", 0.4])
+def test_block_drawn_in_pieces_equals_block_drawn_at_once(tmp_path, relation):
+    """The fast path draws each block in sub-chunks; the reference path all at once."""
+    from montecarlo.distributions import Streams
+    from montecarlo.study import study_from_dict
+
+    raw = {"study": {"system": "ground", "trials": 10000, "seed": 3},
+           "sensor": {"fov_deg": [60.0, 60.0], "pixels": [512, 512]},
+           "mounting": {"psi_deg": {"dist": "normal", "sigma": 3.0}},
+           "geometry": {"L_m": 50.0, "H_m": 1.0},
+           "errors": {"dx_m": {"dist": "uniform", "bound": 0.1},
+                      "dy_m": {"dist": "normal", "sigma": 0.1},
+                      "dh_m": {"dist": "corners", "bound": 0.002},
+                      "pixel_px": {"dist": "uniform", "bound": 0.5},
+                      "pixel_relation": relation}}
+    study = study_from_dict(raw)
+    system, p = study.system, study.points[0].prepared
+    true, whole = system.draws(p, Streams(3, 0, 5), 1000, 5000)
+    s = Streams(3, 0, 5)
+    pieces = [system.draws(p, s, 1000 + a, b - a) for a, b in [(0, 1234), (1234, 4096),
+                                                               (4096, 5000)]]
+    np.testing.assert_array_equal(np.concatenate([e for _, e in pieces], axis=1), whole)
+    np.testing.assert_array_equal(np.concatenate([t[0] for t, _ in pieces]), true[0])
