@@ -303,16 +303,16 @@ class GroundSystem:
         cam = p.camera
         acc = gk.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
-        true, rows, affine = self.unit_draws(p, streams, first_trial, n, _draw_buffers(n))
-        fixed = all(isinstance(a, float) for a in true)
-        C = mounting_matrix(*true).reshape(9) if fixed else \
-            np.ascontiguousarray(mounting_matrix(*true).reshape(n, 9).T)
-        for s in range(0, n, gk.SUB_CHUNK):
+        for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
             m = min(gk.SUB_CHUNK, n - s)
             flags, fields, bins, out_rows = _scratch(m)
-            gk.solve_chunk(C if fixed else C[:, s:s + m], p.L, p.H, float(cam.k_x),
-                           float(cam.k_z), cam.n_x / 2.0, cam.n_z / 2.0,
-                           [r[s:s + m] for r in rows], affine, flags, fields, out_rows)
+            true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
+                                                 _draw_buffers(m))
+            fixed = all(isinstance(a, float) for a in true)
+            C = mounting_matrix(*true).reshape(9) if fixed else \
+                np.ascontiguousarray(mounting_matrix(*true).reshape(m, 9).T)
+            gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
+                           cam.n_z / 2.0, rows, affine, flags, fields, out_rows)
             gk.metrics_in_place(fields)
             for i in range(2):
                 if flags[i].any():
