@@ -165,8 +165,19 @@ def compile_seconds() -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def host_probe() -> float:
+    """Speed of the host right now: numpy arctan2 evaluations per second on one core, in
+    cache. On a shared (virtual) machine it moves with the neighbours' load; trial rates move
+    with it, so compare runs through it."""
+    x = np.linspace(-1.0, 1.0, 4096)
+    y = x + 2.0
+    out = np.empty_like(x)
+    return _median_rate(lambda: [np.arctan2(x, y, out=out) for _ in range(200)], 200 * 4096, 5)
+
+
 def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     """All figures of the benchmark (``quick``: small sizes, for tests)."""
+    probe_before = host_probe()
     big = 10**6 if quick else 10**8
     sizes = [10**k for k in range(4, 7 if quick else 9)]
     naive = naive_rate(200 if quick else 2000, repeats)
@@ -189,6 +200,7 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         "ratio_1core_to_reference": fast1 / reference,
         "ratio_2core_to_1core": fast2 / fast1,
         "compile_seconds_cold_cache": compile_seconds(),
+        "host_probe_atan2_per_s": [probe_before, host_probe()],
         "scaling": scaling,
         "repeats": repeats,
         "cpu_count": os.cpu_count(),
@@ -215,6 +227,9 @@ def format_bench(r: dict[str, Any]) -> str:
         f"process RSS {r['peak_rss_mb']:.0f} MB; whole tree RSS {r['peak_tree_rss_mb']:.0f} MB,"
         f" PSS {r['peak_tree_pss_mb']:.0f} MB",
         f"first-run compile time (empty numba cache): {r['compile_seconds_cold_cache']:.1f} s",
+        "host speed probe (numpy arctan2 per second, one core, before/after): "
+        + " / ".join(f"{p / 1e6:.0f} M" for p in r["host_probe_atan2_per_s"])
+        + " (a shared host's speed moves with its load; so do the rates above)",
         "",
         "scaling through the runner (2 cores):",
     ]
