@@ -24,13 +24,14 @@ KEY_LABELS = {
     "errors.pixel_px.sigma": ("σ_px", "pixel error σ [px]"),
     "errors.dh_m.bound": ("δb", "height-scale error bound δb [m]"),
     "errors.dh_m.sigma": ("σ_δb", "height-scale error σ [m]"),
-    "errors.pixel_relation": ("pixel", "pixel error between targets"),
+    "errors.pixel_relation": ("pixel error", "pixel error between targets"),
     "errors.evaluation": ("", "evaluation"),
 }
 MAX_LINES = 12
 UNIT_SUFFIXES = ("deg_per_root_h", "deg_per_h", "deg_per_s", "arcsec", "arcmin", "mrad", "deg",
                  "px", "hz", "m", "s", "g")
 DIST_FIELDS = ("bound", "sigma", "value", "center", "mean")
+UNIT_DISPLAY = {"deg_per_root_h": "deg/√h", "deg_per_h": "deg/h", "deg_per_s": "deg/s"}
 
 
 def _split_key(key: str) -> tuple[str, str]:
@@ -40,7 +41,7 @@ def _split_key(key: str) -> tuple[str, str]:
     for unit in UNIT_SUFFIXES:
         stem = name.split(" ")[0]
         if stem.endswith("_" + unit):
-            return name.replace("_" + unit, "", 1).replace("_", " "), unit
+            return name.replace("_" + unit, "", 1).replace("_", " "), UNIT_DISPLAY.get(unit, unit)
     return name.replace("_", " "), ""
 
 
@@ -54,6 +55,9 @@ def key_label(key: str) -> str:
 
 def short_label(key: str, value: Any) -> str:
     """Compact 'name=value' of a sweep key for legends and titles."""
+    if key == "errors.pixel_relation":  # "common", "independent" or a correlation
+        return f"pixel error {value}" if value in ("common", "independent") \
+            else f"pixel error ρ={float(value):g}"
     short = KEY_LABELS[key][0] if key in KEY_LABELS else _split_key(key)[0]
     return f"{short}={_fmt(value)}" if short else _fmt(value)
 
@@ -226,6 +230,17 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
     return figures
 
 
+def _rebin(lower: np.ndarray, upper: np.ndarray, counts: np.ndarray, scale: float,
+           edges: np.ndarray) -> np.ndarray:
+    """Counts of occupied log-spaced bins spread evenly over their widths into ``edges`` (by
+    interpolating the cumulative count), so that no linear bin is left empty or doubled."""
+    upper = np.where(np.isfinite(upper), upper, 2.0 * lower)  # the overflow bin
+    cum = np.cumsum(counts)
+    xp = np.column_stack([lower, upper]).ravel() * scale
+    fp = np.column_stack([cum - counts, cum]).ravel()
+    return np.diff(np.interp(edges, xp, fp, right=cum[-1]))
+
+
 def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int = 12
                      ) -> Figure:
     """Distribution of the plotted metric at each grid point (up to ``max_panels`` points)."""
@@ -236,22 +251,23 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
     if len(points) > max_panels:
         points = [points[i] for i in np.linspace(0, len(points) - 1, max_panels).astype(int)]
     variants = list(dict.fromkeys(v for v, mm in study.metrics if mm.name == metric))
-    sel = summary[(summary["metric"] == metric) & summary["point"].isin(points)]
-    xmax = float(np.nanmax(sel["p99"])) * 1.5 or 1.0
-    edges = np.linspace(0.0, xmax, 51)
+    sel = summary[summary["metric"] == metric]
     ncols = min(4, len(points))
     nrows = int(np.ceil(len(points) / ncols))
     fig = Figure(figsize=(3.3 * ncols, 2.5 * nrows + 0.5), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax, p in zip(axes, points, strict=False):
+        # each panel its own range (grid points may differ by orders of magnitude): to 1.5 p99
+        xmax = float(np.nanmax(sel.loc[sel["point"] == p, "p99"]) * 1.5)
+        if not xmax > 0.0:
+            xmax = 1.0
+        edges = np.linspace(0.0, xmax, 51)
         for i, v in enumerate(variants):
             hist = result.points[p].histograms.get((v, metric))
             if hist is None or hist[2].sum() == 0:
                 continue
-            lower, upper, counts = hist
-            centres = 0.5 * (lower + np.minimum(upper, 2 * lower)) * m.scale
-            h, _ = np.histogram(np.minimum(centres, xmax * 0.999), bins=edges, weights=counts)
-            ax.stairs(h / counts.sum(), edges, color=f"C{i}", label=v, fill=i == 0,
+            h = _rebin(*hist, m.scale, edges)
+            ax.stairs(h / hist[2].sum(), edges, color=f"C{i}", label=v, fill=i == 0,
                       alpha=0.35 if i == 0 else 1.0)
         gp = study.points[p]
         ax.set_title(", ".join(short_label(k, v) for k, v in gp.values.items())
@@ -263,7 +279,8 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
     fig.supxlabel(f"{'|' if m.signed else ''}{m.label}{'|' if m.signed else ''} [{m.unit}]",
                   fontsize=9)
     fig.supylabel("fraction of trials", fontsize=9)
-    fig.suptitle(f"{study.header.name}: distribution per grid point", fontsize=10)
+    fig.suptitle(f"{study.header.name}: distribution per grid point (each to 1.5 × its p99)",
+                 fontsize=10)
     return fig
 
 

@@ -108,3 +108,17 @@ def test_failure_leaves_previous_results_untouched(run_dir, monkeypatch):
         main(["run", str(p), "--quiet", "--out", str(out), "--seed", "4"])
     assert (out / "summary.csv").read_bytes() == before
     assert not [q for q in out.parent.iterdir() if q.name.startswith(".out.")]
+
+
+def test_rebin_spreads_log_bins_evenly():
+    """Counts are kept, and a uniform density over log bins stays flat on linear bins."""
+    import numpy as np
+
+    from montecarlo.plots import _rebin
+
+    lower = np.array([0.0, 1.0, 2.0, 4.0])
+    upper = np.array([1.0, 2.0, 4.0, 8.0])
+    counts = np.array([10, 10, 20, 40])  # 10 per unit width
+    h = _rebin(lower, upper, counts, 1.0, np.linspace(0.0, 8.0, 17))
+    np.testing.assert_allclose(h, 5.0)
+    assert h.sum() == counts.sum()
