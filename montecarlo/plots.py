@@ -7,6 +7,7 @@ the summary frame of :meth:`montecarlo.runner.StudyResult.to_frame`.
 from __future__ import annotations
 
 import itertools
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -151,7 +152,11 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         few = len(lines) <= 3
         data_k = _at_base_except(study, data, key)
         xs = data_k[group].drop_duplicates().reset_index(drop=True)
-        numeric = len(group) == 1
+        # a numeric axis: one key, or zipped keys led by a strictly monotone one
+        lead = xs[key]
+        numeric = pd.api.types.is_numeric_dtype(lead) and (
+            len(group) == 1
+            or (lead.is_unique and (lead.is_monotonic_increasing or lead.is_monotonic_decreasing)))
         if numeric:
             xs = xs.sort_values(key).reset_index(drop=True)
         fig = Figure(figsize=(max(6.5, 5.0 * len(variants)), 3.6 * len(rows) + 0.8),
@@ -191,7 +196,9 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
             ax.grid(alpha=0.3, which="both")
             if r == len(rows) - 1:
                 if numeric:
-                    ax.set_xlabel(key_label(key))
+                    others = [_split_key(k)[0] for k in group[1:]]
+                    ax.set_xlabel(key_label(key) + (f"\n(moving with {', '.join(others)})"
+                                                     if others else ""), fontsize=8)
                 else:
                     ax.set_xlabel("\n".join(key_label(k) for k in group), fontsize=8)
             if c == 0:
@@ -270,12 +277,14 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
             ax.stairs(h / hist[2].sum(), edges, color=f"C{i}", label=v, fill=i == 0,
                       alpha=0.35 if i == 0 else 1.0)
         gp = study.points[p]
-        ax.set_title(", ".join(short_label(k, v) for k, v in gp.values.items())
-                     or f"point {p}", fontsize=7)
+        leaders = [k for k in gp.values if _zip_partners(study)[k][0] == k]
+        title = ", ".join(short_label(k, gp.values[k]) for k in leaders) or f"point {p}"
+        ax.set_title(textwrap.fill(title, 48), fontsize=7)
         ax.tick_params(labelsize=7)
     for ax in axes[len(points):]:
         ax.set_visible(False)
-    axes[0].legend(fontsize=7)
+    if variants != ["default"]:
+        axes[0].legend(fontsize=7)
     fig.supxlabel(f"{'|' if m.signed else ''}{m.label}{'|' if m.signed else ''} [{m.unit}]",
                   fontsize=9)
     fig.supylabel("fraction of trials", fontsize=9)
