@@ -1,9 +1,9 @@
 """Error-source distributions and the random streams that feed them.
 
 A source is fixed, uniform on ``center +- bound``, normal ``N(mean, sigma^2)``, or evaluated at
-the two corners ``center +- bound`` (worst case). Draws are *standardised* first (``U(-1, 1)`` or
-``N(0, 1)``) and then scaled, so that common random numbers give the same standardised draws at
-every grid point of a study.
+the two corners ``center +- bound`` (worst case). Draws are unit variates first (``U[0, 1)``,
+``N(0, 1)`` or corner signs) mapped affinely to the source's units, so that common random
+numbers give the same unit draws at every grid point of a study.
 
 Random streams are derived from one ``np.random.SeedSequence(seed)`` by spawn keys
 ``(point, block, source)`` -- or ``(block, source)`` with common random numbers -- so that a trial's
@@ -45,10 +45,6 @@ class Distribution:
     @property
     def is_corner(self) -> bool:
         return self.kind == "corners"
-
-    def from_standard(self, z: np.ndarray) -> np.ndarray:
-        """Scale standardised draws (U(-1, 1), N(0, 1) or corner signs +-1) to this source."""
-        return self.location + self.scale * z
 
     def worst_case(self) -> Distribution:
         """The same bounds evaluated at their corners (uniform -> corners)."""

@@ -51,11 +51,6 @@ def reason_counts(flag_counts: np.ndarray) -> dict[str, int]:
     return counts
 
 
-def new_flags(shape: tuple[int, ...]) -> NDArray[np.uint16]:
-    """An all-valid flag array of the given shape."""
-    return np.zeros(shape, dtype=FLAG_DTYPE)
-
-
 def mark(flags: NDArray[np.uint16], where: ArrayLike, reason: Invalid) -> None:
     """Set ``reason`` in ``flags`` (in place) wherever ``where`` is true."""
     flags[np.asarray(where, bool)] |= FLAG_DTYPE(reason)
