@@ -6,7 +6,7 @@ of the study); every block draws from its own streams (``SeedSequence(seed)`` wi
 a run of consecutive blocks of one grid point; tasks may be any multiple of the block size, run
 in any order, on any worker or backend. Statistics are merged exactly (see
 :mod:`montecarlo.aggregate`), so results are bit-identical for any ``n_jobs``, chunk size and
-backend.
+backend, on machines of one CPU type (numpy's and numba's SIMD code paths depend on it).
 
 Each finished grid point is checkpointed (pickle, written atomically) under
 ``<out>/../.checkpoints/<name>-<hash>/``; rerunning an interrupted study skips finished points
