@@ -29,6 +29,15 @@ from montecarlo.camera import Camera
 from montecarlo.exceptions import InputError
 
 
+def _effect_item(flag: str, item: str, effects: Mapping[str, dia.Effect]) -> tuple[str, str]:
+    """Split ``NAME=TEXT`` from ``flag`` and check that NAME is one of ``effects``."""
+    name, _, text = item.partition("=")
+    name = name.strip()
+    if name not in effects:
+        raise InputError(f"{flag} {item!r}: unknown effect; choose from {', '.join(effects)}")
+    return name, text
+
+
 def parse_effects(items: Sequence[str], effects: Mapping[str, dia.Effect],
                   display_unit: Callable[[str], tuple[str, float]]) -> dict[str, float]:
     """``NAME=V1[,V2...]`` (display units) -> parameter values in SI units.
@@ -40,11 +49,7 @@ def parse_effects(items: Sequence[str], effects: Mapping[str, dia.Effect],
     """
     out: dict[str, float] = {}
     for item in items:
-        name, _, text = item.partition("=")
-        name = name.strip()
-        if name not in effects:
-            raise InputError(f"--effect {item!r}: unknown effect; choose from "
-                             f"{', '.join(effects)}")
+        name, text = _effect_item("--effect", item, effects)
         params = effects[name].parameters
         try:
             values = [float(v) for v in text.split(",")]
@@ -62,11 +67,7 @@ def parse_multiples(items: Sequence[str], effects: Mapping[str, dia.Effect]) -> 
     """``NAME=MULT`` -> {effect: multiple of its MDB}."""
     out = {}
     for item in items:
-        name, _, text = item.partition("=")
-        name = name.strip()
-        if name not in effects:
-            raise InputError(f"--at-mdb {item!r}: unknown effect; choose from "
-                             f"{', '.join(effects)}")
+        name, text = _effect_item("--at-mdb", item, effects)
         try:
             out[name] = float(text)
         except ValueError:
