@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from montecarlo import aggregate as agg
+from montecarlo.engine import aggregate as agg
 
 
 def _stats(x, block=1000, order=None):

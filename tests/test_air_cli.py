@@ -8,7 +8,7 @@ import pytest
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "montecarlo", *args], capture_output=True,
                           text=True, timeout=600)
 
 

@@ -10,7 +10,7 @@ import pytest
 
 @pytest.mark.slow
 def test_bench_quick_json_has_every_figure():
-    out = subprocess.run([sys.executable, "-m", "montecarlo.cli", "bench", "--quick", "--json",
+    out = subprocess.run([sys.executable, "-m", "montecarlo", "bench", "--quick", "--json",
                           "--repeats", "2"], capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)

@@ -8,11 +8,11 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from montecarlo import budget as bg
-from montecarlo import ground
-from montecarlo import sizing as sz
-from montecarlo.exceptions import InputError
-from montecarlo.study import study_from_dict
+from montecarlo.design import budget as bg
+from montecarlo.seed000 import ground
+from montecarlo.design import sizing as sz
+from montecarlo.errors import InputError
+from montecarlo.engine.study import study_from_dict
 
 REQ = sz.Requirement(limit=3.0)
 
@@ -165,14 +165,14 @@ def test_budget_outputs(small_budget, tmp_path):
 
 def test_cli_budget(tmp_path):
     out = subprocess.run(
-        [sys.executable, "-m", "montecarlo.cli", "budget", "--limit", "3", "--samples", "256",
+        [sys.executable, "-m", "montecarlo", "budget", "--limit", "3", "--samples", "256",
          "--trials", "1000", "--relations", "independent", "--point", "L_m=25",
          "--point", "H_m=10", "--point", "pixel_px=0.05", "--n-jobs", "1",
          "--out", str(tmp_path / "b")], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "pixel error independent" in out.stdout
     assert (tmp_path / "b" / "budget-independent.csv").exists()
-    bad = subprocess.run([sys.executable, "-m", "montecarlo.cli", "budget", "--limit", "3",
+    bad = subprocess.run([sys.executable, "-m", "montecarlo", "budget", "--limit", "3",
                           "--point", "Q_m=1", "--out", str(tmp_path / "c")],
                          capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2

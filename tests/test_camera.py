@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from montecarlo import camera as cam
-from montecarlo.camera import Camera
+from montecarlo.geometry import camera as cam
+from montecarlo.geometry.camera import Camera
 
 fov_deg = st.floats(1.0, 179.0)
 pixels = st.integers(2, 8192)

@@ -12,7 +12,7 @@ TRUTH_ARCMIN = {"delta_px": 24.0, "delta_gx": 30.0, "delta_gy": -18.0, "delta_z"
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo.cli", "stabilization", *args],
+    return subprocess.run([sys.executable, "-m", "montecarlo", "stabilization", *args],
                           capture_output=True, text=True, timeout=600)
 
 

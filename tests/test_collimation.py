@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from montecarlo import collimation as col
+from montecarlo.seed003 import model as col
 
 A = col.ARCSEC
 rng = np.random.default_rng(3003)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from montecarlo import collimation as col
+from montecarlo.seed003 import model as col
 
 pytestmark = pytest.mark.slow
 

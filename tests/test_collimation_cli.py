@@ -17,7 +17,7 @@ P2,pitch,0.0,60.0,29.95,59.95
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo.cli", "collimation", *args],
+    return subprocess.run([sys.executable, "-m", "montecarlo", "collimation", *args],
                           capture_output=True, text=True, timeout=600)
 
 

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from montecarlo import collimation as col
-from montecarlo import collimation_effects as ce
-from montecarlo import discrepancy as dia
-from montecarlo.exceptions import InputError
+from montecarlo.seed003 import model as col
+from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.discrepancy import engine as dia
+from montecarlo.errors import InputError
 
 LAYOUT = ce.paper_mirrors()
 TRUTH = {"frame_heading": math.radians(30.0)}
@@ -94,7 +94,7 @@ def test_paper_like_axis_offsets_are_named_and_corrected():
 
 def test_read_mirror_csv(tmp_path):
     data = ce.simulate(LAYOUT, TRUTH, col.Noise(), 1)
-    from montecarlo import synth
+    from montecarlo.discrepancy import synth
 
     path = tmp_path / "c.csv"
     synth.write_collimation_csv(path, data)

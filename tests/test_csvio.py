@@ -2,8 +2,8 @@
 
 import pytest
 
-from montecarlo.csvio import read_table
-from montecarlo.exceptions import InputError
+from montecarlo.io.table import read_table
+from montecarlo.errors import InputError
 
 
 def _write(tmp_path, text):

@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
-from montecarlo import discrepancy as dia
+from montecarlo.discrepancy import engine as dia
 
 X = np.linspace(-1.0, 1.0, 40)
 COLUMNS = {

@@ -12,9 +12,9 @@ runner (``python -m montecarlo.discrepancy_acceptance`` prints the same table).
 import numpy as np
 import pytest
 
-from montecarlo import collimation_effects as ce
-from montecarlo import discrepancy_acceptance as acc
-from montecarlo import ground_effects as ge
+from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.tools import acceptance as acc
+from montecarlo.discrepancy import ground_effects as ge
 
 
 def rates(module, n, seed, **params):

@@ -15,7 +15,7 @@ GROUND = ["--fov-deg", "90", "90", "--pixels", "512", "512", "--pixel-sigma", "0
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "montecarlo", *map(str, args)],
                           capture_output=True, text=True, timeout=600)
 
 

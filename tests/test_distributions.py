@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from montecarlo.distributions import Distribution, Streams, corner_signs, fill_pair
+from montecarlo.engine.distributions import Distribution, Streams, corner_signs, fill_pair
 
 N = 200_000
 UNIFORM = Distribution("uniform", 0.0, 1.0)
@@ -33,7 +33,7 @@ def test_streams_are_common_across_points_only_when_asked():
 
 def test_streams_match_seedsequence_spawn():
     """Spawn keys equal nested SeedSequence.spawn: key (block, source) = child of child."""
-    from montecarlo.distributions import source_key
+    from montecarlo.engine.distributions import source_key
 
     root = np.random.SeedSequence(42)
     child = root.spawn(6)[5]

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from montecarlo import discrepancy as dia
-from montecarlo import ground
-from montecarlo import ground_effects as ge
-from montecarlo.camera import Camera
-from montecarlo.exceptions import InputError
+from montecarlo.discrepancy import engine as dia
+from montecarlo.seed000 import ground
+from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.geometry.camera import Camera
+from montecarlo.errors import InputError
 
 CAM = Camera.from_degrees(90.0, 90.0, 512, 512)
 MOUNT = dict(ge.DEFAULT_MOUNTING)
@@ -245,8 +245,8 @@ def test_run_trials_contract():
 
 def test_study_file_with_units_at_the_edge(tmp_path):
     """A TOML study of the registered system: keys carry units, run_trials gets SI."""
-    from montecarlo.runner import RunOptions, run_study
-    from montecarlo.study import load_study
+    from montecarlo.engine.runner import RunOptions, run_study
+    from montecarlo.engine.study import load_study
 
     path = tmp_path / "d.toml"
     path.write_text('[study]\nsystem = "discrepancy_ground"\ntrials = 6\nseed = 1\n'

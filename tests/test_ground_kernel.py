@@ -6,13 +6,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from montecarlo import aggregate as agg
-from montecarlo import ground
-from montecarlo import ground_kernel as gk
-from montecarlo.camera import Camera
-from montecarlo.rotations import mounting_matrix
-from montecarlo.runner import RunOptions, run_study
-from montecarlo.study import load_study
+from montecarlo.engine import aggregate as agg
+from montecarlo.seed000 import ground
+from montecarlo.seed000 import ground_kernel as gk
+from montecarlo.geometry.camera import Camera
+from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.engine.study import load_study
 
 TOL = 1e-12  # [rad]
 ARCCOS_METRICS = ("eq18_angle", "table1_angle")
@@ -159,8 +159,8 @@ def test_runner_fast_path_agrees_with_reference_path(tmp_path):
 @pytest.mark.parametrize("relation", ["common", "independent", 0.4])
 def test_block_drawn_in_pieces_equals_block_drawn_at_once(tmp_path, relation):
     """The fast path draws each block in sub-chunks; the reference path all at once."""
-    from montecarlo.distributions import Streams
-    from montecarlo.study import study_from_dict
+    from montecarlo.engine.distributions import Streams
+    from montecarlo.engine.study import study_from_dict
 
     raw = {"study": {"system": "ground", "trials": 10000, "seed": 3},
            "sensor": {"fov_deg": [60.0, 60.0], "pixels": [512, 512]},

@@ -3,8 +3,8 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from montecarlo import metrics
-from montecarlo.rotations import mounting_matrix
+from montecarlo.geometry import metrics
+from montecarlo.geometry.rotations import mounting_matrix
 
 rng = np.random.default_rng(18)
 

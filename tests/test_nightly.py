@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from montecarlo import nightly
+from montecarlo.tools import nightly
 
 ROOT = Path(__file__).parent.parent
 
@@ -16,7 +16,7 @@ ROOT = Path(__file__).parent.parent
 @pytest.fixture(scope="module")
 def nightly_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("nightly") / "nightly"
-    proc = subprocess.run([sys.executable, "-m", "montecarlo.cli", "nightly", "--quiet",
+    proc = subprocess.run([sys.executable, "-m", "montecarlo", "nightly", "--quiet",
                            "--studies", str(ROOT / "studies"), "--out", str(out)],
                           capture_output=True, text=True, timeout=900)
     return proc, out
@@ -54,7 +54,7 @@ def test_nightly_exits_nonzero_on_regression(tmp_path):
     shutil.copytree(ROOT / "studies", studies)
     t1 = studies / "table1.toml"
     t1.write_text(t1.read_text().replace("pixels = [512, 512]", "pixels = [500, 500]"))
-    proc = subprocess.run([sys.executable, "-m", "montecarlo.cli", "nightly", "--quiet",
+    proc = subprocess.run([sys.executable, "-m", "montecarlo", "nightly", "--quiet",
                            "--studies", str(studies), "--out", str(tmp_path / "out")],
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 1

@@ -6,7 +6,7 @@ import textwrap
 import pandas as pd
 import pytest
 
-from montecarlo import outputs
+from montecarlo.output import outputs
 from montecarlo.cli import main
 
 STUDY = """
@@ -114,7 +114,7 @@ def test_rebin_spreads_log_bins_evenly():
     """Counts are kept, and a uniform density over log bins stays flat on linear bins."""
     import numpy as np
 
-    from montecarlo.plots import _rebin
+    from montecarlo.output.plots import _rebin
 
     lower = np.array([0.0, 1.0, 2.0, 4.0])
     upper = np.array([1.0, 2.0, 4.0, 8.0])

@@ -6,10 +6,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from montecarlo.exceptions import InputError
-from montecarlo.param_systems import ARCSEC, COLLIMATION, UNITS
-from montecarlo.runner import RunOptions, run_study
-from montecarlo.study import load_study
+from montecarlo.errors import InputError
+from montecarlo.systems.params import ARCSEC, COLLIMATION, UNITS
+from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.engine.study import load_study
 
 AIR = """
 [study]
@@ -56,7 +56,7 @@ def test_unknown_param_is_one_line(tmp_path):
 
 def test_collimation_block_is_deterministic():
     """Same streams, same trials: a block's values depend only on (seed, block)."""
-    from montecarlo.distributions import Streams
+    from montecarlo.engine.distributions import Streams
 
     prepared = COLLIMATION.prepare(COLLIMATION.config_model.model_validate(
         {"params": {"theodolite_sigma_arcsec": 2.0}}))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from montecarlo.rotations import (
+from montecarlo.geometry.rotations import (
     euler_zxy_from_matrix,
     mounting_angles_from_columns,
     mounting_matrix,

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from montecarlo import table1
-from montecarlo.runner import RunOptions, run_study
-from montecarlo.study import load_study
+from montecarlo.seed000 import table1
+from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.engine.study import load_study
 
 ROOT = Path(__file__).parent.parent
 
@@ -131,7 +131,7 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
                  '"geometry.L_m" = [' + ", ".join(f"{x:.1f}" for x in range(30, 330, 10)) + "]")
     study = tmp_path / "resume.toml"
     study.write_text(text)
-    cmd = [sys.executable, "-m", "montecarlo.cli", "run", str(study), "--n-jobs", "1", "--quiet"]
+    cmd = [sys.executable, "-m", "montecarlo", "run", str(study), "--n-jobs", "1", "--quiet"]
     a, b = tmp_path / "a" / "out", tmp_path / "b" / "out"
     subprocess.run([*cmd, "--out", str(a)], check=True, timeout=600)
 

@@ -15,8 +15,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from montecarlo import sizing as sz
-from montecarlo.exceptions import InputError
+from montecarlo.design import sizing as sz
+from montecarlo.errors import InputError
 
 REQ = sz.Requirement(limit=3.0)
 
@@ -184,7 +184,7 @@ def test_confirm_seed_must_differ():
 # --- CLI -----------------------------------------------------------------------------------------
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "montecarlo", *args], capture_output=True,
                           text=True, timeout=600)
 
 

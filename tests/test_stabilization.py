@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from montecarlo import stabilization as st
-from montecarlo.camera import pixels_from_direction
-from montecarlo.stabilization_estimation import carrier_attitude
+from montecarlo.seed001 import kinematics as st
+from montecarlo.geometry.camera import pixels_from_direction
+from montecarlo.seed001.estimate import carrier_attitude
 
 D = np.pi / 180.0
 rng = np.random.default_rng(20110429)  # the patent's filing date

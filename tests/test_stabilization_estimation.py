@@ -10,8 +10,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from montecarlo import stabilization as st
-from montecarlo import stabilization_estimation as se
+from montecarlo.seed001 import kinematics as st
+from montecarlo.seed001 import estimate as se
 
 D = np.pi / 180.0
 ROCK = st.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from montecarlo.cli import main
-from montecarlo.study import load_study
+from montecarlo.engine.study import load_study
 
 STUDIES = sorted(Path(__file__).parent.parent.glob("studies/*.toml"))
 
@@ -151,7 +151,7 @@ def test_missing_file_and_bad_flags(tmp_path, capsys):
 
 def test_real_process_exit_code(tmp_path):
     p = write(tmp_path, BASE.replace("L_m = 50.0", "L_m = -5.0"))
-    out = subprocess.run([sys.executable, "-m", "montecarlo.cli", "run", str(p)],
+    out = subprocess.run([sys.executable, "-m", "montecarlo", "run", str(p)],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "geometry.L_m" in out.stderr

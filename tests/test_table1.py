@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from montecarlo import table1
+from montecarlo.seed000 import table1
 
 
 @pytest.fixture(scope="module")

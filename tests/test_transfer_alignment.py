@@ -5,7 +5,7 @@ import pytest
 from scipy import stats
 from scipy.spatial.transform import Rotation
 
-from montecarlo import transfer_alignment as ta
+from montecarlo.seed000 import transfer_alignment as ta
 
 
 @pytest.fixture(scope="module")

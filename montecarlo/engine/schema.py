@@ -1,0 +1,74 @@
+"""Building blocks of study files shared by all systems: strict models and error sources.
+
+An error source in a study file is a number (a fixed value) or a table with ``dist``::
+
+    dx_m = 0.05                                   # fixed
+    dx_m = { dist = "uniform", bound = 0.1 }      # uniform on center +- bound (center = 0)
+    dx_m = { dist = "normal", sigma = 0.03 }      # normal, mean 0 unless given
+    dx_m = { dist = "corners", bound = 0.1 }      # worst case: both ends +-bound
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
+
+from montecarlo.engine.distributions import Distribution
+
+
+class Strict(BaseModel):
+    """Base of every study-file model: unknown keys and wrong types are errors."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True)
+
+
+class FixedSource(Strict):
+    dist: Literal["fixed"]
+    value: float
+
+
+class UniformSource(Strict):
+    dist: Literal["uniform"]
+    bound: float = Field(ge=0)
+    center: float = 0.0
+
+
+class NormalSource(Strict):
+    dist: Literal["normal"]
+    sigma: float = Field(ge=0)
+    mean: float = 0.0
+
+
+class CornersSource(Strict):
+    dist: Literal["corners"]
+    bound: float = Field(ge=0)
+    center: float = 0.0
+
+
+def _number_is_fixed(value: Any) -> Any:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return {"dist": "fixed", "value": value}
+    return value
+
+
+Source = Annotated[
+    FixedSource | UniformSource | NormalSource | CornersSource,
+    Field(discriminator="dist"),
+    BeforeValidator(_number_is_fixed),
+]
+"""A scalar error source: a number or a ``{dist = ...}`` table."""
+
+
+def to_distribution(source: Source, scale: float = 1.0) -> Distribution:
+    """Internal :class:`Distribution`, multiplied by ``scale`` (e.g. degrees -> radians)."""
+    match source:
+        case FixedSource(value=v):
+            return Distribution("fixed", v * scale)
+        case UniformSource(bound=b, center=c):
+            return Distribution("uniform", c * scale, b * scale)
+        case NormalSource(sigma=s, mean=m):
+            return Distribution("normal", m * scale, s * scale)
+        case CornersSource(bound=b, center=c):
+            return Distribution("corners", c * scale, b * scale)
+    raise TypeError(source)  # pragma: no cover

@@ -1,0 +1,294 @@
+"""Study files: TOML definitions validated on load and expanded into grid points.
+
+Layout of a study file::
+
+    [study]                      # what to run
+    name = "range_sizing"        # results go to results/<name>/
+    system = "ground"            # which simulated system (montecarlo.systems)
+    trials = 10000               # per grid point
+    seed = 1
+    # optional: description, block_size, common_random_numbers, per_trial, confidence
+
+    [spec]                       # optional requirement drawn on plots and checked in reports
+    metric = "rotation_angle"; variant = "normalised"; statistic = "p95"; limit = 3.0
+
+    ... the system's own sections (e.g. [sensor], [geometry], [errors] for "ground") ...
+
+    [[sweep]]                    # optional, repeatable: each group is "product" (default),
+    mode = "zip"                 # "zip" or "one_at_a_time"; groups combine as a product
+    "geometry.L_m" = [50, 100]
+    "geometry.H_m" = [1, 2]
+
+A "one_at_a_time" group varies each of its keys alone while the others keep the value the file
+gives them (the base point, which is also run).
+
+Every mistake raises :class:`InputError` with one line naming the file, the key and the value.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import hashlib
+import itertools
+import json
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, ValidationError, field_validator
+
+from montecarlo.errors import InputError
+from montecarlo.engine.schema import Strict
+from montecarlo.engine.system import SYSTEM_NAMES, Metric, System, get_system
+
+
+class StudyHeader(Strict):
+    """The ``[study]`` table."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", max_length=80)
+    description: str = ""
+    system: str
+    trials: int = Field(gt=0)
+    seed: int = Field(ge=0)
+    block_size: int | None = Field(default=None, gt=0, le=1 << 24)
+    common_random_numbers: bool = True
+    per_trial: bool = False
+    confidence: float = Field(default=0.95, gt=0.0, lt=1.0)
+
+    @field_validator("system")
+    @classmethod
+    def _known_system(cls, v: str) -> str:
+        if v not in SYSTEM_NAMES:
+            raise ValueError(f"unknown system; choose from {', '.join(SYSTEM_NAMES)}")
+        return v
+
+
+class Spec(Strict):
+    """The optional ``[spec]`` table: a requirement in the metric's display unit."""
+
+    metric: str
+    variant: str | None = None
+    statistic: Literal["mean", "std", "p50", "p90", "p95", "p99", "max"] = "p95"
+    limit: float = Field(gt=0)
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One point of a study's sweep: its overrides and its validated, prepared config."""
+
+    index: int
+    overrides: dict[str, Any]
+    values: dict[str, Any]
+    """The value of every sweep key at this point (overridden or the file's base value)."""
+    config: Any
+    prepared: Any
+    trials: int
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study: header, system, spec and the expanded grid."""
+
+    path: Path
+    header: StudyHeader
+    spec: Spec | None
+    system: System
+    sweep_groups: tuple[tuple[str, tuple[str, ...]], ...]
+    """(mode, keys) of each sweep group, in file order."""
+    points: tuple[GridPoint, ...]
+    metrics: tuple[tuple[str, Metric], ...]
+
+    @property
+    def sweep_keys(self) -> tuple[str, ...]:
+        return tuple(k for _, keys in self.sweep_groups for k in keys)
+
+    @property
+    def block_size(self) -> int:
+        return self.header.block_size or self.system.default_block_size
+
+    def resolved(self) -> dict[str, Any]:
+        """Everything that determines the results, as plain JSON-able data."""
+        return {
+            "study": self.header.model_dump(mode="json"),
+            "spec": None if self.spec is None else self.spec.model_dump(mode="json"),
+            "block_size": self.block_size,
+            "points": [{"values": p.values, "trials": p.trials,
+                        "config": p.config.model_dump(mode="json")} for p in self.points],
+        }
+
+    def hash(self) -> str:
+        """SHA-256 of :meth:`resolved` (canonical JSON)."""
+        text = json.dumps(self.resolved(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def metric(self, name: str) -> Metric:
+        return next(m for _, m in self.metrics if m.name == name)
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _validation_message(path: Path, err: ValidationError, prefix: tuple[str, ...],
+                        where: str = "") -> str:
+    """One line for the most telling error: an unknown key (a typo) before anything else."""
+    errors = sorted(err.errors(), key=lambda e: e["type"] != "extra_forbidden")
+    e = errors[0]
+    loc = ".".join(str(x) for x in (*prefix, *e["loc"]))
+    messages = {"extra_forbidden": "unknown key", "missing": "required key is missing"}
+    msg = messages.get(e["type"], e["msg"])
+    if e["type"] == "extra_forbidden":
+        missing = [str(m["loc"][-1]) for m in errors
+                   if m["type"] == "missing" and m["loc"][:-1] == e["loc"][:-1]]
+        close = difflib.get_close_matches(str(e["loc"][-1]), missing, n=1)
+        if close:
+            msg += f" (did you mean '{close[0]}'?)"
+    value = "" if e["type"] == "missing" else f" (got {_short(e.get('input'))})"
+    return f"{path}: {loc}: {msg}{value}{where}"
+
+
+def _parse_sweep(path: Path, raw: Any) -> list[tuple[str, dict[str, list[Any]]]]:
+    groups = raw if isinstance(raw, list) else [raw]
+    parsed = []
+    for i, group in enumerate(groups):
+        where = f"sweep[{i}]" if isinstance(raw, list) else "sweep"
+        if not isinstance(group, dict):
+            raise InputError(f"{path}: {where}: must be a table of key = [values]")
+        group = dict(group)
+        mode = group.pop("mode", "product")
+        if mode not in SWEEP_MODES:
+            raise InputError(f"{path}: {where}.mode: must be one of {', '.join(SWEEP_MODES)} "
+                             f"(got {mode!r})")
+        if not group:
+            raise InputError(f"{path}: {where}: no keys to sweep")
+        for key, values in group.items():
+            if not isinstance(values, list):
+                raise InputError(f"{path}: {where}.{key}: must be a list (got {_short(values)})")
+            if not values:
+                raise InputError(f"{path}: {where}.{key}: empty list, nothing to sweep")
+        lengths = {len(v) for v in group.values()}
+        if mode == "zip" and len(lengths) > 1:
+            sizes = ", ".join(f"{k}: {len(v)}" for k, v in group.items())
+            raise InputError(f"{path}: {where}: zipped lists differ in length ({sizes})")
+        parsed.append((mode, group))
+    return parsed
+
+
+def _expand(groups: list[tuple[str, dict[str, list[Any]]]]) -> list[dict[str, Any]]:
+    per_group = []
+    for mode, group in groups:
+        keys = list(group)
+        if mode == "one_at_a_time":
+            per_group.append([{}] + [{k: v} for k, values in group.items() for v in values])
+            continue
+        combos = zip(*group.values(), strict=True) if mode == "zip" \
+            else itertools.product(*group.values())
+        per_group.append([dict(zip(keys, c, strict=True)) for c in combos])
+    return [{k: v for part in combo for k, v in part.items()}
+            for combo in itertools.product(*per_group)] if per_group else [{}]
+
+
+SWEEP_MODES = ("product", "zip", "one_at_a_time")
+
+
+def _lookup(path: Path, raw: dict[str, Any], key: str) -> Any:
+    """The value at a dotted key of a study dict (the base of a one_at_a_time sweep)."""
+    node: Any = raw
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise InputError(f"{path}: sweep key '{key}': a one_at_a_time sweep needs its base "
+                             f"value in the file")
+        node = node[part]
+    return node
+
+
+def _apply(path: Path, raw: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    node = raw
+    for depth, part in enumerate(parts[:-1]):
+        child = node.setdefault(part, {})
+        if not isinstance(child, dict):
+            raise InputError(f"{path}: sweep key '{key}': '{'.'.join(parts[:depth + 1])}' "
+                             f"is not a table")
+        node = child
+    node[parts[-1]] = value
+
+
+def load_study(path: str | Path, *, trials: int | None = None, seed: int | None = None
+               ) -> Study:
+    """Read, validate and expand a study file; ``trials``/``seed`` override the file's."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such study file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    return study_from_dict(raw, path, trials=trials, seed=seed)
+
+
+def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
+                    trials: int | None = None, seed: int | None = None) -> Study:
+    """Validate and expand a study given as a dict (the parsed TOML); ``path`` labels errors."""
+    path = Path(path)
+    raw = copy.deepcopy(raw)
+    header_raw = raw.pop("study", None)
+    if not isinstance(header_raw, dict):
+        raise InputError(f"{path}: study: required table [study] is missing")
+    header_raw = dict(header_raw)
+    header_raw.setdefault("name", path.stem.strip("<>") or "study")
+    if trials is not None:
+        header_raw["trials"] = trials
+    if seed is not None:
+        header_raw["seed"] = seed
+    try:
+        header = StudyHeader.model_validate(header_raw)
+    except ValidationError as err:
+        raise InputError(_validation_message(path, err, ("study",))) from None
+    system = get_system(header.system)
+
+    spec = None
+    if "spec" in raw:
+        try:
+            spec = Spec.model_validate(raw.pop("spec"))
+        except ValidationError as err:
+            raise InputError(_validation_message(path, err, ("spec",))) from None
+
+    groups = _parse_sweep(path, raw.pop("sweep")) if "sweep" in raw else []
+    sweep_keys = tuple(k for _, g in groups for k in g)
+    if len(set(sweep_keys)) != len(sweep_keys):
+        raise InputError(f"{path}: sweep: a key appears in two sweep groups")
+
+    points = []
+    for i, overrides in enumerate(_expand(groups)):
+        point_raw = copy.deepcopy(raw)
+        for key, value in overrides.items():
+            _apply(path, point_raw, key, value)
+        where = f" [sweep point {i}: " + ", ".join(f"{k} = {v!r}" for k, v in overrides.items()) \
+            + "]" if overrides else ""
+        try:
+            config = system.config_model.model_validate(point_raw)
+        except ValidationError as err:
+            raise InputError(_validation_message(path, err, (), where)) from None
+        prepared = system.prepare(config)
+        values = {k: overrides[k] if k in overrides else _lookup(path, point_raw, k)
+                  for k in sweep_keys}
+        points.append(GridPoint(i, overrides, values, config, prepared,
+                                system.trials_per_point(prepared, header.trials)))
+
+    metrics = tuple(dict.fromkeys(m for p in points for m in system.metrics(p.prepared)))
+    if spec is not None:
+        names = {m.name for _, m in metrics}
+        variants = {v for v, _ in metrics}
+        if spec.metric not in names:
+            raise InputError(f"{path}: spec.metric: unknown metric (got {spec.metric!r}); "
+                             f"choose from {', '.join(sorted(names))}")
+        if spec.variant is not None and spec.variant not in variants:
+            raise InputError(f"{path}: spec.variant: not computed (got {spec.variant!r}); "
+                             f"choose from {', '.join(sorted(variants))}")
+    sweep_groups = tuple((mode, tuple(g)) for mode, g in groups)
+    return Study(path, header, spec, system, sweep_groups, tuple(points), metrics)
+

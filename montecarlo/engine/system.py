@@ -1,0 +1,80 @@
+"""Registry of simulated systems a study can name in ``[study] system = ...``.
+
+A system turns one validated grid-point configuration into per-trial metrics. The runner needs
+from it only what :class:`System` declares, so ground calibration, air calibration, collimation
+and stabilisation studies share one runner, one aggregation and one set of outputs.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from pydantic import BaseModel
+
+from montecarlo.engine.distributions import Streams
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A per-trial output: name, label for plots, display unit and its scale from SI/radians.
+
+    ``signed`` metrics (per-axis errors) report percentiles and max of their magnitude.
+    """
+
+    name: str
+    label: str
+    unit: str
+    scale: float
+    signed: bool = False
+
+
+BlockValues = dict[tuple[str, str], np.ndarray]
+"""(variant, metric) -> per-trial values in SI/radians, NaN for an invalid trial."""
+BlockInvalid = dict[str, dict[str, int]]
+"""variant -> reason name -> count of invalid trials, plus "total"."""
+
+
+class System(Protocol):
+    """What the runner needs from a simulated system."""
+
+    name: str
+    config_model: type[BaseModel]
+    """Pydantic model of the system's sections of a study file."""
+    default_block_size: int
+
+    def prepare(self, config: Any) -> Any:
+        """Internal, picklable form of a validated config (SI units, radians)."""
+
+    def metrics(self, prepared: Any) -> list[tuple[str, Metric]]:
+        """(variant, metric) pairs the system produces for this config."""
+
+    def trials_per_point(self, prepared: Any, requested: int) -> int:
+        """Trials actually run at a grid point (e.g. 2**k for a pure corner enumeration)."""
+
+    def simulate_block(self, prepared: Any, streams: Streams, first_trial: int, n: int
+                       ) -> tuple[BlockValues, BlockInvalid]:
+        """Simulate trials ``first_trial .. first_trial + n - 1`` from the given streams."""
+
+    def describe(self, prepared: Any) -> list[str]:
+        """Lines stating the assumptions of this config, for reports."""
+
+
+_REGISTRY = {
+    "ground": "montecarlo.systems.ground:GroundSystem",
+    "air": "montecarlo.systems.params:AIR",
+    "collimation": "montecarlo.systems.params:COLLIMATION",
+    "stabilization": "montecarlo.systems.params:STABILIZATION",
+    "discrepancy_ground": "montecarlo.discrepancy.ground_effects:STUDY_SYSTEM",
+    "discrepancy_collimation": "montecarlo.discrepancy.collimation_effects:STUDY_SYSTEM",
+}
+SYSTEM_NAMES = tuple(_REGISTRY)
+
+
+def get_system(name: str) -> System:
+    """The registered system of that name (KeyError if none): a class is instantiated."""
+    module, attr = _REGISTRY[name].split(":")
+    obj = getattr(importlib.import_module(module), attr)
+    return obj() if isinstance(obj, type) else obj

@@ -1,0 +1,356 @@
+"""Plots of study results: trends against swept parameters, histograms, the L x H map.
+
+All functions build ``matplotlib.figure.Figure`` objects (no pyplot state, no display) and take
+the summary frame of :meth:`montecarlo.runner.StudyResult.to_frame`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import textwrap
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from matplotlib.colors import LogNorm, Normalize
+from matplotlib.figure import Figure
+
+from montecarlo.engine.runner import StudyResult
+from montecarlo.engine.study import Study
+
+KEY_LABELS = {
+    "geometry.L_m": ("L", "range L [m]"),
+    "geometry.H_m": ("H", "height difference H [m]"),
+    "errors.pixel_px.bound": ("df", "pixel error bound df [px]"),
+    "errors.pixel_px.sigma": ("σ_px", "pixel error σ [px]"),
+    "errors.dh_m.bound": ("δb", "height-scale error bound δb [m]"),
+    "errors.dh_m.sigma": ("σ_δb", "height-scale error σ [m]"),
+    "errors.pixel_relation": ("pixel error", "pixel error between targets"),
+    "errors.evaluation": ("", "evaluation"),
+}
+MAX_LINES = 12
+UNIT_SUFFIXES = ("deg_per_root_h", "deg_per_h", "deg_per_s", "arcsec", "arcmin", "mrad", "deg",
+                 "px", "hz", "m", "s", "g")
+DIST_FIELDS = ("bound", "sigma", "value", "center", "mean")
+UNIT_DISPLAY = {"deg_per_root_h": "deg/√h", "deg_per_h": "deg/h", "deg_per_s": "deg/s"}
+
+
+def _split_key(key: str) -> tuple[str, str]:
+    """(name, unit) of a sweep key: 'params.pitch_span_deg' -> ('pitch span', 'deg')."""
+    parts = key.split(".")
+    name = " ".join(parts[-2:]) if parts[-1] in DIST_FIELDS and len(parts) > 2 else parts[-1]
+    for unit in UNIT_SUFFIXES:
+        stem = name.split(" ")[0]
+        if stem.endswith("_" + unit):
+            return name.replace("_" + unit, "", 1).replace("_", " "), UNIT_DISPLAY.get(unit, unit)
+    return name.replace("_", " "), ""
+
+
+def key_label(key: str) -> str:
+    """Axis label of a sweep key, with unit."""
+    if key in KEY_LABELS:
+        return KEY_LABELS[key][1]
+    name, unit = _split_key(key)
+    return f"{name} [{unit}]" if unit else name
+
+
+def short_label(key: str, value: Any) -> str:
+    """Compact 'name=value' of a sweep key for legends and titles."""
+    if key == "errors.pixel_relation":  # "common", "independent" or a correlation
+        return f"pixel error {value}" if value in ("common", "independent") \
+            else f"pixel error ρ={float(value):g}"
+    short = KEY_LABELS[key][0] if key in KEY_LABELS else _split_key(key)[0]
+    return f"{short}={_fmt(value)}" if short else _fmt(value)
+
+
+def plot_metric(study: Study) -> str:
+    """The metric plots show: the spec's, else the true rotation angle."""
+    return study.spec.metric if study.spec else "rotation_angle"
+
+
+def _zip_partners(study: Study) -> dict[str, tuple[str, ...]]:
+    """For each sweep key, the keys zipped with it (including itself), in file order."""
+    partners: dict[str, tuple[str, ...]] = {}
+    for mode, keys in study.sweep_groups:
+        for k in keys:
+            partners[k] = keys if mode == "zip" else (k,)
+    return partners
+
+
+def _at_base_except(study: Study, data: pd.DataFrame, key: str) -> pd.DataFrame:
+    """Rows where the other keys of ``key``'s one_at_a_time group are at their base values."""
+    base = study.points[0].values  # point 0 is the base of every one_at_a_time group
+    for mode, keys in study.sweep_groups:
+        if mode == "one_at_a_time" and key in keys:
+            for other in keys:
+                if other != key:
+                    data = data[data[other] == base[other]]
+    return data
+
+
+def _oat_keys(study: Study) -> set[str]:
+    return {k for mode, keys in study.sweep_groups if mode == "one_at_a_time" for k in keys}
+
+
+def _fmt(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _spec_text(study: Study) -> str:
+    s = study.spec
+    assert s is not None
+    return f"spec: {s.statistic} ≤ {s.limit:g} {study.metric(s.metric).unit}"
+
+
+def _select(data: pd.DataFrame, keys: list[str], values: tuple) -> pd.DataFrame:
+    for k, v in zip(keys, values, strict=True):
+        data = data[data[k] == v]
+    return data
+
+
+def _combos(data: pd.DataFrame, keys: list[str], limit: int) -> tuple[list[tuple], bool]:
+    """Distinct value combinations of ``keys`` (evenly thinned to ``limit``; True if thinned)."""
+    combos = list(data[keys].drop_duplicates().itertuples(index=False, name=None)) if keys \
+        else [()]
+    if len(combos) <= limit:
+        return combos, False
+    return [combos[i] for i in np.linspace(0, len(combos) - 1, limit).round().astype(int)], True
+
+
+def _is_categorical(data: pd.DataFrame, key: str) -> bool:
+    return not pd.api.types.is_numeric_dtype(data[key])
+
+
+def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str, Figure]]:
+    """One figure per swept parameter: the metric's percentiles against it.
+
+    Columns of panels are solver variants; rows are the values of other categorical sweep keys
+    (e.g. common vs independent pixel error); other numeric sweep keys are lines. Each line is
+    the median (p50) with p95 above it (band for up to three lines, dashed otherwise) and the
+    confidence interval of p95 as error bars; with up to three lines also p99 (dotted) and max
+    (crosses). Zipped keys share one figure whose ticks show every zipped value.
+    """
+    study = result.study
+    metric = plot_metric(study)
+    m = study.metric(metric)
+    data = summary[summary["metric"] == metric]
+    variants = list(dict.fromkeys(data["variant"]))
+    partners = _zip_partners(study)
+    figures = []
+    for key in study.sweep_keys:
+        group = list(partners[key])
+        if group[0] != key or (len(group) == 1 and _is_categorical(data, key)):
+            continue  # zipped keys share their group's figure; categories become panels
+        oat = _oat_keys(study)
+        rest = [k for k in study.sweep_keys if k not in group and k not in oat]
+        row_keys = [k for k in rest if _is_categorical(data, k)]
+        line_keys = [k for k in rest if k not in row_keys]
+        # a zipped group moves together: its first key names the line
+        named = [k for k in line_keys if partners[k][0] == k]
+        rows, _ = _combos(data, row_keys, 4)
+        lines, thinned = _combos(data, line_keys, MAX_LINES)
+        few = len(lines) <= 3
+        data_k = _at_base_except(study, data, key)
+        xs = data_k[group].drop_duplicates().reset_index(drop=True)
+        # a numeric axis: one key, or zipped keys led by a strictly monotone one
+        lead = xs[key]
+        numeric = pd.api.types.is_numeric_dtype(lead) and (
+            len(group) == 1
+            or (lead.is_unique and (lead.is_monotonic_increasing or lead.is_monotonic_decreasing)))
+        if numeric:
+            xs = xs.sort_values(key).reset_index(drop=True)
+        fig = Figure(figsize=(max(6.5, 5.0 * len(variants)), 3.6 * len(rows) + 0.8),
+                     layout="constrained")
+        axes = fig.subplots(len(rows), len(variants), squeeze=False, sharex=True, sharey="row")
+        for (r, row), (c, variant) in itertools.product(enumerate(rows), enumerate(variants)):
+            ax = axes[r, c]
+            panel = _select(data_k[data_k["variant"] == variant], row_keys, row)
+            for i, line in enumerate(lines):
+                sel = _select(panel, line_keys, line).merge(xs.reset_index(), on=group)
+                sel = sel.sort_values(key if numeric else "index")
+                x = sel[key].to_numpy(float) if numeric else sel["index"].to_numpy()
+                color = f"C{i % 10}"
+                label = ", ".join(short_label(k, v) for k, v in zip(line_keys, line,
+                                                                     strict=True)
+                                  if k in named) or None
+                ax.plot(x, sel["p50"], "-o" if numeric else "o", color=color, ms=3, label=label)
+                if not numeric:  # separate cases (zipped rows): no lines between them
+                    ax.vlines(x, sel["p50"], sel["p95"], color=color, alpha=0.5)
+                    ax.plot(x, sel["p95"], "_", color=color, ms=10)
+                    ax.plot(x, sel["max"], "x", color=color, ms=5)
+                elif few:
+                    ax.fill_between(x, sel["p50"], sel["p95"], color=color, alpha=0.2, lw=0)
+                    ax.plot(x, sel["p99"], ":", color=color, lw=1)
+                    ax.plot(x, sel["max"], "x", color=color, ms=5)
+                else:
+                    ax.plot(x, sel["p95"], "--", color=color, lw=1)
+                err_lo = (sel["p95"] - sel["p95_lo"]).fillna(0.0)
+                err_hi = (sel["p95_hi"] - sel["p95"]).fillna(0.0)
+                ax.errorbar(x, sel["p95"], yerr=[err_lo, err_hi], fmt="none", ecolor=color,
+                            capsize=2, lw=0.8)
+            if study.spec and study.spec.variant in (None, variant):
+                ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
+            title = ", ".join(short_label(k, v) for k, v in zip(row_keys, row, strict=True))
+            name = "" if variants == ["default"] else variant
+            ax.set_title(" — ".join(t for t in (name, title) if t), fontsize=9)
+            ax.grid(alpha=0.3, which="both")
+            if r == len(rows) - 1:
+                if numeric:
+                    others = [_split_key(k)[0] for k in group[1:]]
+                    ax.set_xlabel(key_label(key) + (f"\n(moving with {', '.join(others)})"
+                                                     if others else ""), fontsize=8)
+                else:
+                    ax.set_xlabel("\n".join(key_label(k) for k in group), fontsize=8)
+            if c == 0:
+                ax.set_ylabel(f"{m.label} [{m.unit}]", fontsize=8)
+        ax0 = axes[0, 0]
+        if numeric:
+            vals = xs[key].to_numpy(float)
+            if vals.min() > 0 and vals.max() / vals.min() >= 8:
+                ax0.set_xscale("log")
+            ax0.set_xticks(vals, [_fmt(v) for v in vals], fontsize=7)
+            ax0.minorticks_off()
+        else:
+            ax0.set_xticks(xs.index, ["\n".join(_fmt(v) for v in row)
+                                      for row in xs.itertuples(index=False)], fontsize=7)
+        for r, row in enumerate(rows):  # each row its own scale: log if it spans decades
+            shown = _select(data_k, row_keys, row)
+            lo, hi = np.nanmin(shown["p50"]), np.nanmax(shown["p99" if few else "p95"])
+            if lo > 0 and hi / lo > 30:
+                axes[r, 0].set_yscale("log")
+            else:
+                axes[r, 0].set_ylim(bottom=0)
+        n_labels = len(ax0.get_legend_handles_labels()[1])
+        if n_labels:
+            zipped = [k for k in line_keys if k not in named]
+            notes = ([f"thinned to {MAX_LINES} lines"] if thinned else []) + \
+                    ([f"{len(zipped)} zipped keys move with them"] if zipped else [])
+            ax0.legend(fontsize=6, loc="best", ncols=2 if n_labels > 6 else 1,
+                       title="; ".join(notes) or None, title_fontsize=6)
+        ci = f"{study.header.confidence:.0%}"
+        style = ("cases: dot p50, bar to p95 (—), × max" if not numeric
+                 else "line p50, band to p95, dotted p99, × max" if few
+                 else "solid p50, dashed p95")
+        fig.suptitle(f"{study.header.name}: {m.label}\n{style}; bars: {ci} CI of p95",
+                     fontsize=9)
+        figures.append((f"trend_{key.replace('.', '_')}.png", fig))
+    return figures
+
+
+def _rebin(lower: np.ndarray, upper: np.ndarray, counts: np.ndarray, scale: float,
+           edges: np.ndarray) -> np.ndarray:
+    """Counts of occupied log-spaced bins spread evenly over their widths into ``edges`` (by
+    interpolating the cumulative count), so that no linear bin is left empty or doubled."""
+    upper = np.where(np.isfinite(upper), upper, 2.0 * lower)  # the overflow bin
+    cum = np.cumsum(counts)
+    xp = np.column_stack([lower, upper]).ravel() * scale
+    fp = np.column_stack([cum - counts, cum]).ravel()
+    return np.diff(np.interp(edges, xp, fp, right=cum[-1]))
+
+
+def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int = 12
+                     ) -> Figure:
+    """Distribution of the plotted metric at each grid point (up to ``max_panels`` points)."""
+    study = result.study
+    metric = plot_metric(study)
+    m = study.metric(metric)
+    points = list(range(len(study.points)))
+    if len(points) > max_panels:
+        points = [points[i] for i in np.linspace(0, len(points) - 1, max_panels).astype(int)]
+    variants = list(dict.fromkeys(v for v, mm in study.metrics if mm.name == metric))
+    sel = summary[summary["metric"] == metric]
+    ncols = min(4, len(points))
+    nrows = int(np.ceil(len(points) / ncols))
+    fig = Figure(figsize=(3.3 * ncols, 2.5 * nrows + 0.5), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax, p in zip(axes, points, strict=False):
+        # each panel its own range (grid points may differ by orders of magnitude): to 1.5 p99
+        xmax = float(np.nanmax(sel.loc[sel["point"] == p, "p99"]) * 1.5)
+        if not xmax > 0.0:
+            xmax = 1.0
+        edges = np.linspace(0.0, xmax, 51)
+        for i, v in enumerate(variants):
+            hist = result.points[p].histograms.get((v, metric))
+            if hist is None or hist[2].sum() == 0:
+                continue
+            h = _rebin(*hist, m.scale, edges)
+            ax.stairs(h / hist[2].sum(), edges, color=f"C{i}", label=v, fill=i == 0,
+                      alpha=0.35 if i == 0 else 1.0)
+        gp = study.points[p]
+        leaders = [k for k in gp.values if _zip_partners(study)[k][0] == k]
+        title = ", ".join(short_label(k, gp.values[k]) for k in leaders) or f"point {p}"
+        ax.set_title(textwrap.fill(title, 48), fontsize=7)
+        ax.tick_params(labelsize=7)
+    for ax in axes[len(points):]:
+        ax.set_visible(False)
+    if variants != ["default"]:
+        axes[0].legend(fontsize=7)
+    fig.supxlabel(f"{'|' if m.signed else ''}{m.label}{'|' if m.signed else ''} [{m.unit}]",
+                  fontsize=9)
+    fig.supylabel("fraction of trials", fontsize=9)
+    fig.suptitle(f"{study.header.name}: distribution per grid point (each to 1.5 × its p99)",
+                 fontsize=10)
+    return fig
+
+
+def lh_map_figure(result: StudyResult, summary: pd.DataFrame) -> Figure | None:
+    """Map of the spec statistic over range L x height difference H, with the spec contour."""
+    study = result.study
+    keys = study.sweep_keys
+    partners = _zip_partners(study)
+    L, H = "geometry.L_m", "geometry.H_m"
+    if L not in keys or H not in keys or partners[L] != (L,) or partners[H] != (H,) \
+            or {L, H} & _oat_keys(study):
+        return None
+    metric = plot_metric(study)
+    m = study.metric(metric)
+    stat = study.spec.statistic if study.spec else "p95"
+    variant = (study.spec.variant if study.spec else None) or \
+        [v for v, mm in study.metrics if mm.name == metric][-1]
+    data = summary[(summary["metric"] == metric) & (summary["variant"] == variant)]
+    others = [k for k in keys if k not in (L, H)]
+    combos = list(data[others].drop_duplicates().itertuples(index=False)) if others else [()]
+    combos = combos[:4]
+    fig = Figure(figsize=(5.0 * len(combos), 4.4), layout="constrained")
+    axes = fig.subplots(1, len(combos), squeeze=False)[0]
+    grids = []
+    for combo in combos:
+        sel = data
+        for k, v in zip(others, combo, strict=True):
+            sel = sel[sel[k] == v]
+        grids.append(sel.pivot_table(index=H, columns=L, values=stat))
+    vmin = min(float(np.nanmin(g.to_numpy())) for g in grids)
+    vmax = max(float(np.nanmax(g.to_numpy())) for g in grids)
+    norm = LogNorm(vmin, vmax) if vmin > 0 and vmax / vmin > 10 else Normalize(0, vmax)
+    for ax, combo, grid in zip(axes, combos, grids, strict=True):
+        z = grid.to_numpy()
+        mesh = ax.pcolormesh(np.arange(z.shape[1] + 1), np.arange(z.shape[0] + 1), z,
+                             cmap="viridis", norm=norm)
+        for (i, j), val in np.ndenumerate(z):
+            ax.text(j + 0.5, i + 0.5, f"{val:.0f}" if val >= 100 else f"{val:.3g}",
+                    ha="center", va="center", fontsize=7,
+                    color="w" if norm(val) < 0.6 else "k")
+        if study.spec is not None and np.nanmin(z) < study.spec.limit < np.nanmax(z):
+            cs = ax.contour(np.arange(z.shape[1]) + 0.5, np.arange(z.shape[0]) + 0.5, z,
+                            levels=[study.spec.limit], colors="r", linewidths=2)
+            ax.clabel(cs, fmt=lambda _: _spec_text(study), fontsize=7)
+        ax.set_xticks(np.arange(z.shape[1]) + 0.5, [_fmt(v) for v in grid.columns], fontsize=7)
+        ax.set_yticks(np.arange(z.shape[0]) + 0.5, [_fmt(v) for v in grid.index], fontsize=7)
+        ax.set_xlabel(key_label(L))
+        ax.set_ylabel(key_label(H))
+        ax.set_title(", ".join(short_label(k, v) for k, v in zip(others, combo, strict=True)),
+                     fontsize=9)
+    fig.colorbar(mesh, ax=list(axes), label=f"{stat} of {m.label}, {variant} [{m.unit}]")
+    fig.suptitle(f"{study.header.name}: {stat} over L × H"
+                 + (f" (red: {_spec_text(study)})" if study.spec else ""), fontsize=10)
+    return fig
+
+
+def all_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str, Figure]]:
+    """Every plot of a study, as (file name, figure)."""
+    figures = trend_figures(result, summary)
+    figures.append(("histograms.png", histogram_figure(result, summary)))
+    lh = lh_map_figure(result, summary)
+    if lh is not None:
+        figures.append(("map_L_H.png", lh))
+    return figures

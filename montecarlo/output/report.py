@@ -1,0 +1,115 @@
+"""The Markdown report of a study: assumptions, spec verdicts, summary table, plots."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import Any
+
+import pandas as pd
+
+from montecarlo.output.plots import key_label, plot_metric
+from montecarlo.engine.runner import StudyResult
+
+
+def markdown_table(frame: pd.DataFrame, floatfmt: str = ".4g") -> str:
+    """A GitHub-flavoured Markdown table of a small frame."""
+
+    def cell(v: Any) -> str:
+        if isinstance(v, float):
+            return "–" if math.isnan(v) else format(v, floatfmt)
+        return str(v)
+
+    head = "| " + " | ".join(str(c) for c in frame.columns) + " |"
+    rule = "|" + "|".join("---" for _ in frame.columns) + "|"
+    rows = ["| " + " | ".join(cell(v) for v in row) + " |"
+            for row in frame.itertuples(index=False)]
+    return "\n".join([head, rule, *rows])
+
+
+def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | None:
+    """Per grid point and variant: the spec statistic, its interval and whether the spec is met.
+
+    'meets' needs the whole confidence interval below the limit, 'fails' the whole interval
+    above; otherwise the trials do not decide ('undecided: more trials'). For max, mean and std
+    no interval is computed and the value alone decides.
+    """
+    study = result.study
+    spec = study.spec
+    if spec is None:
+        return None
+    sel = summary[summary["metric"] == spec.metric]
+    if spec.variant is not None:
+        sel = sel[sel["variant"] == spec.variant]
+    stat = spec.statistic
+    has_ci = stat.startswith("p")
+    lo = sel[f"{stat}_lo"] if has_ci else sel[stat]
+    hi = sel[f"{stat}_hi"] if has_ci else sel[stat]
+    verdict = ["meets" if h <= spec.limit else "fails" if lo_ > spec.limit
+               else "undecided: more trials" for lo_, h in zip(lo.fillna(-math.inf),
+                                                               hi.fillna(math.inf), strict=True)]
+    out = sel[["point", *study.sweep_keys, "variant", "count", stat]].copy()
+    if has_ci:
+        out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" for a, b in zip(lo, hi, strict=True)]
+    out["verdict"] = verdict
+    return out.rename(columns={k: key_label(k) for k in study.sweep_keys})
+
+
+def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[str, Any],
+                  plot_files: list[str]) -> str:
+    study = result.study
+    h = study.header
+    metric = plot_metric(study)
+    m = study.metric(metric)
+    trials = sorted({p.trials for p in study.points})
+    lines = [
+        f"# Study `{h.name}`", "",
+        h.description or "(no description)", "",
+        f"- system: `{h.system}`; grid points: {len(study.points)}; trials per point: "
+        f"{', '.join(str(t) for t in trials)}",
+        f"- seed {h.seed}; common random numbers: {'yes' if h.common_random_numbers else 'no'}; "
+        f"block size {study.block_size}; percentile intervals at {h.confidence:.0%} confidence",
+        f"- study hash `{provenance['study_hash'][:16]}`; montecarlo "
+        f"{provenance['package_version']}; commit `{provenance['git_commit']}`",
+        "", "## Assumptions", "",
+    ]
+    described = Counter(line for p in study.points for line in study.system.describe(p.prepared))
+    for line, count in described.items():
+        suffix = "" if count == len(study.points) else f" ({count} of {len(study.points)} points)"
+        lines.append(f"- {line}{suffix}")
+    lines += ["", "Metrics (all in the outputs, each under its own name):", ""]
+    for name, mm in dict.fromkeys((mm.name, mm) for _, mm in study.metrics):
+        note = " (percentiles and max of the magnitude)" if mm.signed else ""
+        lines.append(f"- `{name}`: {mm.label} [{mm.unit}]{note}")
+
+    verdicts = spec_verdicts(result, summary)
+    if verdicts is not None:
+        spec = study.spec
+        assert spec is not None
+        lines += ["", "## Spec", "",
+                  f"Requirement: {spec.statistic} of `{spec.metric}`"
+                  f"{' (' + spec.variant + ')' if spec.variant else ''} ≤ {spec.limit:g} "
+                  f"{study.metric(spec.metric).unit}.", "",
+                  markdown_table(verdicts), ""]
+
+    cols = ["point", *study.sweep_keys, "variant", "count", "invalid", "mean", "std", "p50",
+            "p95", "p95_lo", "p95_hi", "p99", "max"]
+    table = summary.loc[summary["metric"] == metric, cols].rename(
+        columns={k: key_label(k) for k in study.sweep_keys})
+    lines += ["", f"## Summary: {m.label} [{m.unit}]", "",
+              "All metrics are in `summary.csv` / `summary.parquet`.", "",
+              markdown_table(table), ""]
+
+    inv = summary[summary["invalid"] > 0]
+    if len(inv):
+        reason_cols = [c for c in summary.columns if c.startswith("invalid_")]
+        per = inv.drop_duplicates(["point", "variant"])[["point", "variant", "invalid",
+                                                          *reason_cols]]
+        lines += ["## Invalid trials", "",
+                  "Trials whose geometry has no solution are counted here, never turned "
+                  "into numbers.", "", markdown_table(per), ""]
+
+    lines += ["## Plots", ""]
+    for f in plot_files:
+        lines += [f"![{f}](plots/{f})", ""]
+    return "\n".join(lines)

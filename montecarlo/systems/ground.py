@@ -1,0 +1,345 @@
+"""The ground static-base calibration (seed 000, section 1) as a study system.
+
+Study-file sections (units in the key names; angles in degrees at this edge only)::
+
+    [sensor]    fov_deg = [90, 90], pixels = [512, 512]
+    [mounting]  psi_deg, theta_deg, gamma_deg         true mounting angles: fixed or drawn
+    [geometry]  L_m, H_m                              nominal range and height difference
+    [errors]    evaluation = "sampled" | "worst_case"
+                dx_m, dy_m, dh1_m                     lateral, range, height-reference errors
+                dh_m                                  height-scale error (the paper's delta_b)
+                pixel_px                              image error on each axis of each target
+                pixel_relation = "common" | "independent" | rho   (between targets A and B)
+    [solver]    variants = ["raw", "normalised"]
+
+``evaluation = "worst_case"`` evaluates every bounded error source (uniform or corners) at both
+ends of its bound; a normal source is then an error. With only corners and fixed values a grid
+point runs exactly 2**k trials, the corners; its ``max`` is the worst case of Table 1.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from montecarlo.engine import aggregate as agg
+from montecarlo.seed000 import ground
+from montecarlo.engine.aggregate import PointStats
+from montecarlo.geometry.camera import Camera
+from montecarlo.engine.distributions import Distribution, Streams, corner_signs, fill_pair
+from montecarlo.seed000.ground import SOLVERS
+from montecarlo.geometry.invalid import reason_counts
+from montecarlo.geometry.metrics import AXIS_METRICS, ROTATION_METRICS
+from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.engine.schema import Source, Strict, to_distribution
+from montecarlo.engine.system import BlockInvalid, BlockValues, Metric
+
+PLACEMENT_SOURCES = ("dx_m", "dy_m", "dh1_m", "dh_m")
+MOUNTING_SOURCES = ("psi_deg", "theta_deg", "gamma_deg")
+
+
+class Sensor(Strict):
+    fov_deg: list[float] = Field(min_length=2, max_length=2)
+    pixels: list[int] = Field(min_length=2, max_length=2)
+
+    @field_validator("fov_deg")
+    @classmethod
+    def _fov_below_180(cls, v: list[float]) -> list[float]:
+        if not all(0.0 < f < 180.0 for f in v):
+            raise ValueError("each field of view must lie in (0, 180) deg")
+        return v
+
+    @field_validator("pixels")
+    @classmethod
+    def _positive_pixels(cls, v: list[int]) -> list[int]:
+        if not all(n > 0 for n in v):
+            raise ValueError("pixel counts must be positive")
+        return v
+
+
+class Mounting(Strict):
+    psi_deg: Source = 0.0
+    theta_deg: Source = 0.0
+    gamma_deg: Source = 0.0
+
+
+class Geometry(Strict):
+    L_m: float = Field(gt=0)
+    H_m: float
+
+    @field_validator("H_m")
+    @classmethod
+    def _nonzero_height(cls, v: float) -> float:
+        if v == 0.0:
+            raise ValueError("the height difference H must not be 0 (eq. (11) divides by it)")
+        return v
+
+
+class Errors(Strict):
+    evaluation: Literal["sampled", "worst_case"] = "sampled"
+    dx_m: Source = 0.0
+    dy_m: Source = 0.0
+    dh1_m: Source = 0.0
+    dh_m: Source = 0.0
+    pixel_px: Source = 0.0
+    pixel_relation: Literal["common", "independent"] | float
+
+    @field_validator("pixel_relation")
+    @classmethod
+    def _correlation_range(cls, v: str | float) -> str | float:
+        if isinstance(v, float) and not -1.0 <= v <= 1.0:
+            raise ValueError("a correlation must lie in [-1, 1]")
+        return v
+
+    @model_validator(mode="after")
+    def _worst_case_needs_bounds(self) -> Errors:
+        if self.evaluation == "worst_case":
+            for name in (*PLACEMENT_SOURCES, "pixel_px"):
+                try:
+                    to_distribution(getattr(self, name)).worst_case()
+                except ValueError as exc:
+                    raise ValueError(f"{name}: {exc}") from None
+            if isinstance(self.pixel_relation, float) and self.pixel_relation not in (0.0, 1.0):
+                raise ValueError("worst case needs pixel_relation 'common' or 'independent'")
+        return self
+
+
+class Solver(Strict):
+    variants: list[Literal["raw", "normalised"]] = Field(
+        default_factory=lambda: ["raw", "normalised"], min_length=1)
+
+    @field_validator("variants")
+    @classmethod
+    def _unique(cls, v: list[str]) -> list[str]:
+        if len(set(v)) != len(v):
+            raise ValueError("variants must not repeat")
+        return v
+
+
+class GroundConfig(Strict):
+    """The ground system's sections of a study file."""
+
+    sensor: Sensor
+    mounting: Mounting = Field(default_factory=Mounting)
+    geometry: Geometry
+    errors: Errors
+    solver: Solver = Field(default_factory=Solver)
+
+
+@dataclass(frozen=True)
+class PreparedGround:
+    """A grid point in internal units: radians, metres, pixels."""
+
+    camera: Camera
+    mounting: tuple[Distribution, Distribution, Distribution]
+    L: float
+    H: float
+    placement: dict[str, Distribution]
+    pixel: Distribution
+    relation: str | float
+    variants: tuple[str, ...]
+    corners: tuple[str, ...]
+    """Names of the corner sources, in the order of their sign bits."""
+
+
+def _pixel_corner_names(relation: str | float) -> tuple[str, ...]:
+    if relation in ("common", 1.0):
+        return ("pixel_x", "pixel_z")
+    return ("pixel_a_x", "pixel_a_z", "pixel_b_x", "pixel_b_z")
+
+
+@functools.lru_cache(maxsize=2)
+def _draw_buffers(n: int) -> np.ndarray:
+    """Draw buffers of one block for the fast path, reused by every block of a process."""
+    return np.empty((9, n))
+
+
+@functools.lru_cache(maxsize=4)
+def _scratch(m: int) -> tuple[np.ndarray, ...]:
+    """Work buffers of the fast kernel for m trials (flags, fields, bins, the kernel's view of
+    fields), reused for every block of a process: fresh megabyte-sized buffers would cost a
+    page fault per 4 KB each time."""
+    from montecarlo.seed000 import ground_kernel as gk
+
+    fields = np.empty((2 * gk.N_FIELDS, m))
+    return np.empty((2, m), np.uint16), fields, np.empty(m, np.int32), gk.output_rows(fields)
+
+
+class GroundSystem:
+    """Seed 000 ground calibration as a :class:`montecarlo.systems.System`."""
+
+    name = "ground"
+    config_model = GroundConfig
+    default_block_size = 1 << 16
+
+    def prepare(self, config: GroundConfig) -> PreparedGround:
+        e = config.errors
+        worst = e.evaluation == "worst_case"
+        placement = {n: to_distribution(getattr(e, n)) for n in PLACEMENT_SOURCES}
+        pixel = to_distribution(e.pixel_px)
+        if worst:
+            placement = {n: d.worst_case() for n, d in placement.items()}
+            pixel = pixel.worst_case()
+        mounting = tuple(to_distribution(getattr(config.mounting, n), np.pi / 180.0)
+                         for n in MOUNTING_SOURCES)
+        corners = [n for n, d in zip(MOUNTING_SOURCES, mounting, strict=True) if d.is_corner]
+        corners += [n for n, d in placement.items() if d.is_corner]
+        if pixel.is_corner:
+            corners += _pixel_corner_names(e.pixel_relation)
+        return PreparedGround(
+            camera=Camera.from_degrees(*config.sensor.fov_deg, *config.sensor.pixels),
+            mounting=mounting,  # type: ignore[arg-type]
+            L=config.geometry.L_m, H=config.geometry.H_m,
+            placement=placement, pixel=pixel, relation=e.pixel_relation,
+            variants=tuple(config.solver.variants), corners=tuple(corners))
+
+    def metrics(self, prepared: PreparedGround) -> list[tuple[str, Metric]]:
+        rot = [Metric(n, label, "mrad", 1e3) for n, (_, label) in ROTATION_METRICS.items()]
+        axis = [Metric(n, label, "mrad", 1e3, signed=True) for n, label in AXIS_METRICS.items()]
+        return [(v, m) for v in prepared.variants for m in rot + axis]
+
+    def trials_per_point(self, prepared: PreparedGround, requested: int) -> int:
+        random = any(d.is_random for d in (*prepared.mounting, *prepared.placement.values(),
+                                            prepared.pixel))
+        return requested if random else 1 << len(prepared.corners)
+
+    def unit_draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int,
+                   buffers: np.ndarray | None = None
+                   ) -> tuple[tuple[np.ndarray | float, ...], list[np.ndarray], np.ndarray]:
+        """The trials of a block as unit draws and their affine maps.
+
+        ``buffers`` (9, n), if given, holds the draws (reused between blocks by the fast path).
+
+        Returns
+        -------
+        true : (psi, theta, gamma) [rad], floats if fixed, else arrays of shape (n,)
+        rows : 8 arrays of shape (n,): unit draws (U[0, 1), N(0, 1) or corner signs) of dx,
+            dy, dh1, dh, then of the pixel errors of A (x, z) and of B (x, z). Rows may be
+            shared (B's are A's for a common pixel error).
+        affine : (2, 8): row k in its units [m] or [px] is ``affine[0, k] * rows[k] +
+            affine[1, k]``.
+        """
+        signs = corner_signs(first_trial, n, len(p.corners))
+        free = iter(np.empty((9, n)) if buffers is None else buffers)
+        zeros = next(free)
+        zeros[...] = 0.0
+
+        def unit(name: str, dist: Distribution) -> tuple[np.ndarray, float, float]:
+            if dist.is_corner:
+                return signs[p.corners.index(name)], dist.scale, dist.location
+            if dist.is_random:
+                u = next(free)
+                return (u, *streams.fill_unit(dist, name, u))
+            return zeros, 0.0, dist.location
+
+        true: list[np.ndarray | float] = []
+        for name, dist in zip(MOUNTING_SOURCES, p.mounting, strict=True):
+            if dist.is_corner or dist.is_random:
+                u = signs[p.corners.index(name)] if dist.is_corner else \
+                    streams.fill(dist, name, np.empty(n))
+                true.append(dist.location + dist.scale * u if dist.is_corner else u)
+            else:
+                true.append(dist.location)
+        cols = [unit(name, dist) for name, dist in p.placement.items()]
+        px = p.pixel
+        if px.is_corner:
+            names = _pixel_corner_names(p.relation)
+            pix = [(signs[p.corners.index(k)], px.scale, px.location) for k in names]
+            cols += pix if len(pix) == 4 else pix * 2
+        elif px.is_random and p.relation in ("common", "independent", 0.0, 1.0):
+            pix_a = [unit("pixel_x:a", px), unit("pixel_z:a", px)]
+            cols += pix_a + (pix_a if p.relation in ("common", 1.0)
+                             else [unit("pixel_x:b", px), unit("pixel_z:b", px)])
+        elif px.is_random:  # correlated: values through the copula of fill_pair
+            vals = np.empty((4, n))
+            fill_pair(px, p.relation, streams, "pixel_x", vals[0], vals[2])
+            fill_pair(px, p.relation, streams, "pixel_z", vals[1], vals[3])
+            cols += [(v, 1.0, 0.0) for v in vals]
+        else:
+            cols += [(zeros, 0.0, px.location)] * 4
+        rows = [c[0] for c in cols]
+        affine = np.array([[c[1] for c in cols], [c[2] for c in cols]])
+        return tuple(true), rows, affine
+
+    def draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int
+              ) -> tuple[tuple[np.ndarray | float, ...], np.ndarray]:
+        """True mounting angles [rad] and the errors of a block: (8, n) rows dx, dy, dh1, dh
+        [m], then the pixel errors of A (x, z) and of B (x, z) [px]."""
+        true, rows, affine = self.unit_draws(p, streams, first_trial, n)
+        return true, affine[0][:, None] * np.stack(rows) + affine[1][:, None]
+
+    def simulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
+                       n: int) -> tuple[BlockValues, BlockInvalid]:
+        """Per-trial metrics through the literal reference implementation (montecarlo.ground)."""
+        p = prepared
+        true, e = self.draws(p, streams, first_trial, n)
+        solutions = ground.simulate(
+            p.camera, true, p.L, p.H, dx=e[0], dy=e[1], dh1=e[2], dh=e[3],
+            pixel_error_a=e[4:6].T, pixel_error_b=e[6:8].T, solvers=p.variants)
+        values: BlockValues = {}
+        invalid: BlockInvalid = {}
+        for variant, sol in solutions.items():
+            for metric, v in ground.solution_metrics(sol, true).items():
+                values[(variant, metric)] = v
+            invalid[variant] = reason_counts(np.bincount(sol.invalid, minlength=256))
+        return values, invalid
+
+    def accumulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
+                         n: int, block: int, stats: PointStats) -> None:
+        """The same trials through the fused kernel, aggregated straight into ``stats``."""
+        from montecarlo.seed000 import ground_kernel as gk  # numba: loaded only where kernels run
+
+        p = prepared
+        keys = [(SOLVERS[v], m) for v, m in gk.VALUE_ROWS]  # both variants are computed
+        if stats.hist_matrix is None:
+            stats.hist_matrix = np.zeros((len(keys), agg.N_BINS), np.int64)
+            for r, key in enumerate(keys):
+                if key[0] in p.variants:
+                    stats.metrics[key] = agg.MetricStats(hist=stats.hist_matrix[r])
+        cam = p.camera
+        acc = gk.new_stats(len(keys))
+        flag_counts = np.zeros((2, 256), np.int64)
+        for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
+            m = min(gk.SUB_CHUNK, n - s)
+            flags, fields, bins, out_rows = _scratch(m)
+            true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
+                                                 _draw_buffers(m))
+            fixed = all(isinstance(a, float) for a in true)
+            C = mounting_matrix(*true).reshape(9) if fixed else \
+                np.ascontiguousarray(mounting_matrix(*true).reshape(m, 9).T)
+            gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
+                           cam.n_z / 2.0, rows, affine, flags, fields, out_rows)
+            gk.metrics_in_place(fields)
+            for i in range(2):
+                if flags[i].any():
+                    flag_counts[i] += np.bincount(flags[i], minlength=256)
+            gk.accumulate(fields, gk.METRIC_ROWS, stats.hist_matrix, acc, bins)
+        for r, key in enumerate(keys):
+            if key not in stats.metrics:
+                continue  # a variant the study does not ask for
+            count, mean, m2, lo, hi = acc[r]
+            ms = stats.metrics[key]
+            ms.blocks[block] = (int(count), float(mean), float(m2)) if count else (0, 0.0, 0.0)
+            ms.minimum = min(ms.minimum, float(lo))
+            ms.maximum = max(ms.maximum, float(hi))
+        for i, v in enumerate(SOLVERS):
+            if v in p.variants:
+                stats._add_invalid({v: reason_counts(flag_counts[i])})
+        stats.blocks.add(block)
+
+    def describe(self, prepared: PreparedGround) -> list[str]:
+        p = prepared
+        rel = p.relation
+        relation = {"common": "common to both targets (the paper's Table 1 assumption)",
+                    "independent": "independent between targets (centroid noise)"}.get(
+            rel, f"correlated between targets, rho = {rel}")  # type: ignore[arg-type]
+        lines = [f"pixel error {relation}"]
+        if p.corners:
+            lines.append(f"worst case over {1 << len(p.corners)} corners of: "
+                         + ", ".join(p.corners))
+        return lines
+

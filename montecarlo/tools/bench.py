@@ -1,0 +1,241 @@
+"""Benchmark of the ground-calibration trial paths: ``montecarlo bench [--json] [--quick]``.
+
+Workload: one sampled Table 1 configuration (seed 000, section 1.4: 90 x 90 deg, 512 x 512 px,
+true angles 30/20/10 deg, L = 100 m, H = 1 m, placement errors uniform +-0.1 m, height-scale
+error +-1 mm, pixel error uniform +-0.5 px common to both targets), both solver variants and
+all six metrics per trial. A trial is one full draw -> placement -> pixels -> two solves ->
+metrics; the runner paths include the streaming statistics.
+
+(a) a Python loop of single trials through the literal reference, (b) the vectorised literal
+reference (one block at a time, with streaming statistics), (c) the fused kernel on one core,
+(d) the fused kernel through the study runner on two cores (loky). Each figure is the median of
+``repeats`` timed runs in this invocation, after one untimed warm-up.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import psutil
+
+from montecarlo.seed000 import ground
+from montecarlo.engine.aggregate import PointStats
+from montecarlo.engine.distributions import Streams
+from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.engine.study import study_from_dict
+
+WORKLOAD = {
+    "study": {"name": "bench", "system": "ground", "trials": 1, "seed": 1},
+    "sensor": {"fov_deg": [90.0, 90.0], "pixels": [512, 512]},
+    "mounting": {"psi_deg": 30.0, "theta_deg": 20.0, "gamma_deg": 10.0},
+    "geometry": {"L_m": 100.0, "H_m": 1.0},
+    "errors": {"dx_m": {"dist": "uniform", "bound": 0.1},
+               "dy_m": {"dist": "uniform", "bound": 0.1},
+               "dh1_m": {"dist": "uniform", "bound": 0.1},
+               "dh_m": {"dist": "uniform", "bound": 0.001},
+               "pixel_px": {"dist": "uniform", "bound": 0.5},
+               "pixel_relation": "common"},
+}
+
+
+def _study(trials: int):
+    raw = {**WORKLOAD, "study": {**WORKLOAD["study"], "trials": trials}}
+    return study_from_dict(raw, "<bench>")
+
+
+def _median_rate(fn, trials: int, repeats: int) -> float:
+    fn()  # warm-up: compilation, caches, worker pool
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return trials / statistics.median(times)
+
+
+def naive_rate(n: int, repeats: int) -> float:
+    """(a) single trials in a Python loop through ground.simulate and solution_metrics."""
+    study = _study(n)
+    system, p = study.system, study.points[0].prepared
+    true, e = system.draws(p, Streams(1, 0, 0), 0, n)
+
+    def run() -> None:
+        for i in range(n):
+            sols = ground.simulate(p.camera, true, p.L, p.H, dx=e[0, i], dy=e[1, i],
+                                   dh1=e[2, i], dh=e[3, i], pixel_error_a=e[4:6, i],
+                                   pixel_error_b=e[6:8, i])
+            for sol in sols.values():
+                ground.solution_metrics(sol, true)
+
+    return _median_rate(run, n, repeats)
+
+
+def _block_rate(n: int, repeats: int, fast: bool) -> float:
+    study = _study(n)
+    system, p = study.system, study.points[0].prepared
+    bs = study.block_size
+
+    def run() -> None:
+        stats = PointStats()
+        for b, first in enumerate(range(0, n, bs)):
+            m = min(bs, n - first)
+            streams = Streams(1, 0, b)
+            if fast:
+                system.accumulate_block(p, streams, first, m, b, stats)
+            else:
+                stats.add_block(b, *system.simulate_block(p, streams, first, m))
+
+    return _median_rate(run, n, repeats)
+
+
+def runner_rate(n: int, repeats: int, n_jobs: int = 2) -> float:
+    """(d) trials per second through run_study on ``n_jobs`` loky workers."""
+    study = _study(n)
+    with tempfile.TemporaryDirectory() as tmp:
+        options = RunOptions(n_jobs=n_jobs, progress=False, checkpoint_dir=Path(tmp))
+
+        def run() -> None:
+            run_study(study, options)
+            for f in Path(tmp).glob("*/*.pkl"):  # start each run afresh, not from checkpoints
+                f.unlink()
+
+        return _median_rate(run, n, repeats)
+
+
+def study_memory(trials: int) -> dict[str, float]:
+    """Peak memory of ``montecarlo run`` on the workload with ``trials`` trials [MB].
+
+    Runs the CLI in a fresh process (as a user would) and polls its process tree every 0.1 s:
+    the largest RSS of any one process, the largest sum of RSS (which counts shared libraries
+    once per process) and the largest sum of PSS (shared pages split between their users).
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bench.toml"
+        lines = []
+        for section, table in {**WORKLOAD, "study": {**WORKLOAD["study"], "trials": trials}
+                               }.items():
+            lines.append(f"[{section}]")
+            lines += [f"{k} = {_toml(v)}" for k, v in table.items()]
+        path.write_text("\n".join(lines) + "\n")
+        proc = psutil.Popen([sys.executable, "-m", "montecarlo.cli", "run", str(path),
+                             "--quiet", "--out", str(Path(tmp) / "out")],
+                            stdout=subprocess.DEVNULL)
+        peak = {"max_process_rss_mb": 0.0, "tree_rss_mb": 0.0, "tree_pss_mb": 0.0}
+        while proc.poll() is None:
+            rss = pss = biggest = 0.0
+            for p in [proc, *proc.children(recursive=True)]:
+                with contextlib.suppress(psutil.Error):
+                    info = p.memory_full_info()
+                    rss += info.rss
+                    pss += info.pss
+                    biggest = max(biggest, info.rss)
+            for key, value in zip(peak, (biggest, rss, pss), strict=True):
+                peak[key] = max(peak[key], value / 2**20)
+            time.sleep(0.1)
+        if proc.returncode != 0:
+            raise RuntimeError(f"montecarlo run exited with {proc.returncode}")
+    return peak
+
+
+def _toml(value: Any) -> str:
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    return f'"{value}"' if isinstance(value, str) else repr(value)
+
+
+def compile_seconds() -> float:
+    """First-run compile time of the kernel with an empty numba cache (in a fresh process)."""
+    code = ("import time; t = time.perf_counter(); from montecarlo import bench; "
+            "bench._block_rate(8192, 1, True); print(time.perf_counter() - t)")
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                             text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def host_probe() -> float:
+    """Speed of the host right now: numpy arctan2 evaluations per second on one core, in
+    cache. On a shared (virtual) machine it moves with the neighbours' load; trial rates move
+    with it, so compare runs through it."""
+    x = np.linspace(-1.0, 1.0, 4096)
+    y = x + 2.0
+    out = np.empty_like(x)
+    return _median_rate(lambda: [np.arctan2(x, y, out=out) for _ in range(200)], 200 * 4096, 5)
+
+
+def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+    """All figures of the benchmark (``quick``: small sizes, for tests)."""
+    probe_before = host_probe()
+    big = 10**6 if quick else 10**8
+    sizes = [10**k for k in range(4, 7 if quick else 9)]
+    naive = naive_rate(200 if quick else 2000, repeats)
+    reference = _block_rate(2**16 if quick else 2**18, repeats, fast=False)
+    fast1 = _block_rate(2**18 if quick else 2**22, repeats, fast=True)
+    scaling = [{"trials": n, "trials_per_s": runner_rate(n, repeats)} for n in sizes]
+    fast2 = scaling[-1]["trials_per_s"]
+    memory = {n: study_memory(n) for n in (sizes[0], big)}
+    return {
+        "naive_trials_per_s": naive,
+        "reference_trials_per_s": reference,
+        "fast_trials_per_s_1core": fast1,
+        "fast_trials_per_s_2core": fast2,
+        "peak_rss_mb": memory[big]["max_process_rss_mb"],
+        "peak_tree_rss_mb": memory[big]["tree_rss_mb"],
+        "peak_tree_pss_mb": memory[big]["tree_pss_mb"],
+        "memory_by_trials": {str(n): m for n, m in memory.items()},
+        "peak_memory_trials": big,
+        "ratio_2core_to_naive": fast2 / naive,
+        "ratio_1core_to_reference": fast1 / reference,
+        "ratio_2core_to_1core": fast2 / fast1,
+        "compile_seconds_cold_cache": compile_seconds(),
+        "host_probe_atan2_per_s": [probe_before, host_probe()],
+        "scaling": scaling,
+        "repeats": repeats,
+        "cpu_count": os.cpu_count(),
+        "numpy": np.__version__,
+        "workload": "seed 000 Table 1, sampled: L=100 m, H=1 m, df=0.5 px common, both "
+                    "solvers, 6 metrics, streaming statistics",
+    }
+
+
+def format_bench(r: dict[str, Any]) -> str:
+    rows = [("(a) naive per-trial loop, literal reference", "naive_trials_per_s"),
+            ("(b) vectorised literal reference, 1 core", "reference_trials_per_s"),
+            ("(c) fused kernel, 1 core", "fast_trials_per_s_1core"),
+            ("(d) fused kernel through the runner, 2 cores", "fast_trials_per_s_2core")]
+    lines = [
+        f"workload: {r['workload']}",
+        f"median of {r['repeats']} runs each, {r['cpu_count']} CPUs",
+        "",
+        *(f"{label:<46}{r[key]:>14,.0f} trials/s" for label, key in rows),
+        "",
+        f"(d)/(a) = {r['ratio_2core_to_naive']:,.0f}x   (c)/(b) = "
+        f"{r['ratio_1core_to_reference']:.1f}x   (d)/(c) = {r['ratio_2core_to_1core']:.2f}x",
+        f"memory of `montecarlo run` on a {r['peak_memory_trials']:.0e}-trial study: largest "
+        f"process RSS {r['peak_rss_mb']:.0f} MB; whole tree RSS {r['peak_tree_rss_mb']:.0f} MB,"
+        f" PSS {r['peak_tree_pss_mb']:.0f} MB",
+        f"first-run compile time (empty numba cache): {r['compile_seconds_cold_cache']:.1f} s",
+        "host speed probe (numpy arctan2 per second, one core, before/after): "
+        + " / ".join(f"{p / 1e6:.0f} M" for p in r["host_probe_atan2_per_s"])
+        + " (a shared host's speed moves with its load; so do the rates above)",
+        "",
+        "scaling through the runner (2 cores):",
+    ]
+    for s in r["scaling"]:
+        lines.append(f"  {s['trials']:>12,} trials  {s['trials_per_s']:>14,.0f} trials/s")
+    for n, m in r["memory_by_trials"].items():
+        lines.append(f"memory at {int(n):,} trials: largest process {m['max_process_rss_mb']:.0f}"
+                     f" MB, tree RSS {m['tree_rss_mb']:.0f} MB, tree PSS {m['tree_pss_mb']:.0f} MB")
+    return "\n".join(lines)
