@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from montecarlo.engine import accumulate
 from montecarlo.engine import aggregate as agg
 
 
@@ -121,3 +122,23 @@ def test_point_summary_counts_invalid_by_reason():
     row = ps.summary({"a": False}, 0.95).iloc[0]
     assert row["count"] == 3 and row["invalid"] == 1 and row["invalid_OUTSIDE_FOV"] == 1
     assert row["mean"] == 2.0 and row["max"] == 3.0
+
+
+def test_accumulate_equals_reference_aggregation():
+    rng = np.random.default_rng(5)
+    values = rng.lognormal(-7, 1, (3, 20000)) * rng.choice([-1, 1], (3, 20000))
+    values[:, ::13] = np.nan
+    hist = np.zeros((3, agg.N_BINS), np.int64)
+    stats = accumulate.new_stats(3)
+    for s in range(0, 20000, 8192):
+        chunk = np.ascontiguousarray(values[:, s:s + 8192])
+        accumulate.accumulate(chunk, np.arange(3), hist, stats, np.empty(chunk.shape[1], np.int64))
+    for r in range(3):
+        ref = agg.MetricStats()
+        ref.add_block(0, values[r])
+        np.testing.assert_array_equal(hist[r], ref.hist)
+        n, mean, m2 = ref.blocks[0]
+        assert stats[r, 0] == n
+        assert stats[r, 1] == pytest.approx(mean, rel=1e-12)
+        assert stats[r, 2] == pytest.approx(m2, rel=1e-10)
+        assert (stats[r, 3], stats[r, 4]) == (ref.minimum, ref.maximum)

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from montecarlo.seed000 import air
-from montecarlo.geometry import metrics
-from montecarlo.seed000 import transfer_alignment as ta
 from montecarlo.errors import InputError
+from montecarlo.geometry import metrics
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed000 import air
+from montecarlo.seed000 import transfer_alignment as ta
 
 rng = np.random.default_rng(19)
 ANGLES = tuple(np.radians([30.0, 20.0, 10.0]))

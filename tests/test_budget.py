@@ -9,10 +9,10 @@ import pytest
 from scipy import stats
 
 from montecarlo.design import budget as bg
-from montecarlo.seed000 import ground
 from montecarlo.design import sizing as sz
 from montecarlo.errors import InputError
-from montecarlo.engine.study import study_from_dict
+from montecarlo.seed000 import ground
+from montecarlo.systems import study_from_dict
 
 REQ = sz.Requirement(limit=3.0)
 

@@ -1,14 +1,20 @@
 """Seed 003 autocollimator-INS axis calibration: model, fit, Figs. 3-6, study hook."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from montecarlo.io.collimation_csv import MirrorData, read_mirror_csv, write_mirror_csv
+from montecarlo.seed003 import figures as figs
+from montecarlo.seed003 import fit as cf
 from montecarlo.seed003 import model as col
+from montecarlo.systems import collimation as sc
+from montecarlo.units import ARCSEC
 
-A = col.ARCSEC
+A = ARCSEC
 rng = np.random.default_rng(3003)
 
 
@@ -93,7 +99,7 @@ def test_noise_free_fit_recovers_the_truth(with_tilt):
     roll = rng.normal(0, 0.01, az.size)
     heading, pitch = col.predict_readings(truth, az, el, roll)
     effects = col.BASE_EFFECTS + (("frame_misalignment",) if with_tilt else ())
-    f = col.fit(az, el, heading, pitch, roll, sigma=2 * A, effects=effects)
+    f = cf.fit(az, el, heading, pitch, roll, sigma=2 * A, effects=effects)
     for k, v in f.params.items():
         assert col.wrap(v - truth[k]) == pytest.approx(0.0, abs=1e-6 * A), k
     assert np.abs(f.residuals).max() < 1e-6 * A
@@ -106,7 +112,7 @@ def test_corrected_readings_point_along_the_mirror_normals():
     c_az, c_el, _ = col.correct_readings(heading, pitch, 0.0, truth["axis_az"], truth["axis_el"])
     np.testing.assert_allclose(col.wrap(c_az - az - 0.3), 0.0, atol=1e-14)
     np.testing.assert_allclose(c_el, el, atol=1e-14)
-    consistency = col.consistency_angles(truth, az, el, heading, pitch)
+    consistency = cf.consistency_angles(truth, az, el, heading, pitch)
     assert consistency.max() < 1e-9 * A
 
 
@@ -115,7 +121,7 @@ def test_covariance_matches_the_linearised_design():
     truth = {"axis_az": 20 * A, "axis_el": 20 * A, "frame_heading": 0.1}
     az, el, heading, pitch = _layout_readings(truth)
     sigma = 2.0 * A
-    f = col.fit(az, el, heading, pitch, sigma=sigma)
+    f = cf.fit(az, el, heading, pitch, sigma=sigma)
     m = az.size
     design = np.zeros((2 * m, 3))  # columns: frame_heading, axis_az, axis_el
     design[:m, 0] = 1.0
@@ -131,7 +137,7 @@ def test_fit_statistics_match_the_injected_noise():
     Tolerances are 3 standard errors of each statistic for n = 200.
     """
     n = 200
-    out = col.run_trials({}, np.random.default_rng(11), n)
+    out = sc.run_trials({}, np.random.default_rng(11), n)
     p2 = 0.9545
     for k in ("axis_az", "axis_el"):
         assert np.mean(out[f"{k}_within_2sigma"]) >= p2 - 3 * math.sqrt(p2 * (1 - p2) / n)
@@ -145,25 +151,25 @@ def test_not_separable_layouts_are_reported():
     az = np.radians([0.0, 30.0, 60.0, 90.0])
     el = np.zeros(4)
     heading, pitch = col.predict_readings({"axis_az": 1e-3}, az, el)
-    with pytest.raises(col.NotSeparable, match="axis_az"):
-        col.fit(az, el, heading, pitch)
-    with pytest.raises(col.NotSeparable, match="at least 2 mirrors"):
-        col.fit(az[:1], el[:1] + 0.3, heading[:1], pitch[:1])
+    with pytest.raises(cf.NotSeparable, match="axis_az"):
+        cf.fit(az, el, heading, pitch)
+    with pytest.raises(cf.NotSeparable, match="at least 2 mirrors"):
+        cf.fit(az[:1], el[:1] + 0.3, heading[:1], pitch[:1])
 
 
 def test_run_trials_is_deterministic_and_complete():
-    a = col.run_trials({"n_pitch": 3}, np.random.default_rng(5), 4)
-    b = col.run_trials({"n_pitch": 3}, np.random.default_rng(5), 4)
-    assert set(a) == set(col.METRICS)
+    a = sc.run_trials({"n_pitch": 3}, np.random.default_rng(5), 4)
+    b = sc.run_trials({"n_pitch": 3}, np.random.default_rng(5), 4)
+    assert set(a) == set(sc.METRICS)
     for k in a:
         assert a[k].shape == (4,) and a[k].dtype == np.float64
         np.testing.assert_array_equal(a[k], b[k])
     with pytest.raises(ValueError, match="unknown parameter"):
-        col.run_trials({"axis_azimuth": 0.0}, np.random.default_rng(5), 1)
+        sc.run_trials({"axis_azimuth": 0.0}, np.random.default_rng(5), 1)
 
 
 def test_run_trials_flags_unseparable_layout_as_nan():
-    out = col.run_trials({"n_pitch": 0}, np.random.default_rng(5), 3)
+    out = sc.run_trials({"n_pitch": 0}, np.random.default_rng(5), 3)
     assert np.isnan(out["axis_az_error"]).all()
 
 
@@ -171,8 +177,8 @@ def test_unreported_roll_biases_the_fit():
     """A mount that rolls 1 deg while the fit assumes roll 0 leaves offsets*roll errors."""
     params = {"theodolite_sigma": 0.0, "ins_heading_sigma": 0.0, "ins_pitch_sigma": 0.0,
               "ins_roll_sigma": 0.0, "mount_roll_sigma": math.radians(1.0)}
-    used = col.run_trials({**params, "use_roll": 1}, np.random.default_rng(2), 3)
-    assumed = col.run_trials({**params, "use_roll": 0}, np.random.default_rng(2), 3)
+    used = sc.run_trials({**params, "use_roll": 1}, np.random.default_rng(2), 3)
+    assumed = sc.run_trials({**params, "use_roll": 0}, np.random.default_rng(2), 3)
     assert np.nanmax(used["axis_error_angle"]) < 1e-6 * A
     assert np.nanmax(assumed["axis_error_angle"]) > 0.1 * A
 
@@ -183,22 +189,22 @@ def test_unreported_roll_biases_the_fit():
 def test_horizontal_pair_pitch_offset_gives_twice_lambda_at_180():
     """Seed 003, section 2: 'at alpha = 180 deg, delta beta is almost 2 lambda'."""
     lam = math.radians(0.1)
-    da, db = col.pair_deviation("horizontal", math.pi, axis_el=lam)
+    da, db = figs.pair_deviation("horizontal", math.pi, axis_el=lam)
     assert db == pytest.approx(-2 * lam, rel=1e-12)
     assert abs(da) < 1e-12
     alpha = np.radians(np.linspace(0, 180, 37))
-    _, db = col.pair_deviation("horizontal", alpha, axis_el=lam)
+    _, db = figs.pair_deviation("horizontal", alpha, axis_el=lam)
     np.testing.assert_allclose(db, -lam * (1 - np.cos(alpha)), atol=lam**2)
 
 
 def test_vertical_pair_azimuth_offset_at_60_degrees():
     """'At beta = 60 deg, delta beta is almost equal to gamma' holds for delta alpha instead."""
     gam = math.radians(0.1)
-    da, db = col.pair_deviation("vertical", math.radians(60), axis_az=gam)
+    da, db = figs.pair_deviation("vertical", math.radians(60), axis_az=gam)
     assert da == pytest.approx(-gam, rel=1e-4)
     assert abs(db) < 0.01 * gam
     beta = np.radians(np.linspace(0, 80, 17))
-    da, _ = col.pair_deviation("vertical", beta, axis_az=gam)
+    da, _ = figs.pair_deviation("vertical", beta, axis_az=gam)
     np.testing.assert_allclose(da, -gam * (1 / np.cos(beta) - 1), atol=30 * gam**2)
 
 
@@ -206,7 +212,7 @@ def test_vertical_pair_azimuth_offset_at_60_degrees():
 def test_offsets_along_the_mirror_plane_leave_no_deviation(kind, offset):
     angle = np.radians(np.linspace(0, 85, 18))
     for view in ("body", "readings"):
-        da, db = col.pair_deviation(kind, angle, view=view, **{offset: math.radians(0.1)})
+        da, db = figs.pair_deviation(kind, angle, view=view, **{offset: math.radians(0.1)})
         assert np.abs(da).max() < 1e-12 and np.abs(db).max() < 1e-12
 
 
@@ -221,14 +227,14 @@ def test_body_view_matches_conjugated_mirror_rotation():
             rel = (r_off * mirror * r_off.inv()).as_euler("ZXY")
             ref_da = -rel[:, 0] - (angle if kind == "horizontal" else 0)
             ref_db = rel[:, 1] - (angle if kind == "vertical" else 0)
-            da, db = col.pair_deviation(kind, angle, axis_az=gam, axis_el=lam)
+            da, db = figs.pair_deviation(kind, angle, axis_az=gam, axis_el=lam)
             scale = 1 / np.cos(angle) ** 2 if kind == "vertical" else 1.0
             assert np.all(np.abs(da - ref_da) < 3 * off**2 * scale)
             assert np.all(np.abs(db - ref_db) < 3 * off**2 * scale)
 
 
 def test_paper_statements_verdicts():
-    rows = col.paper_statements()
+    rows = figs.paper_statements()
     verdicts = {(r["statement"], r["quantity"]): r["holds"] for r in rows}
     assert not verdicts[("at β = 60°, Δβ is almost equal to γ", "Δβ(60°) / γ")]
     assert verdicts[("(the same read as Δα)", "Δα(60°) / γ")]
@@ -244,10 +250,13 @@ def test_csv_round_trip(tmp_path):
     data = col.simulate_readings({"axis_az": 1e-3, "frame_heading": 3.0}, az, el, col.Noise(),
                                  rng=1)
     path = tmp_path / "cal.csv"
-    col.write_readings(path, ["a", "b", "c", "d", "e"], sets.tolist(), data, with_roll=True)
-    got = col.read_readings(path)
-    assert got.mirror == ["a", "b", "c", "d", "e"] and got.sets == sets.tolist()
+    names = ("a", "b", "c", "d", "e")
+    mirrors = MirrorData(names, tuple(sets.tolist()), data["theodolite_az"],
+                         data["theodolite_el"], data["ins_az"], data["ins_el"], data["ins_roll"])
+    write_mirror_csv(path, mirrors)
+    got = read_mirror_csv(path)
+    assert got.mirror == names and got.sets == tuple(sets.tolist())
     for key in ("theodolite_az", "theodolite_el", "ins_az", "ins_el", "ins_roll"):
         np.testing.assert_allclose(getattr(got, key), data[key], atol=1e-5 * A)
-    col.write_readings(path, ["a", "b", "c", "d", "e"], sets.tolist(), data)
-    assert col.read_readings(path).ins_roll is None
+    write_mirror_csv(path, dataclasses.replace(mirrors, ins_roll=None))
+    assert read_mirror_csv(path).ins_roll is None

@@ -8,20 +8,21 @@ import math
 import numpy as np
 import pytest
 
-from montecarlo.seed003 import model as col
+from montecarlo.systems import collimation as sc
+from montecarlo.units import ARCSEC
 
 pytestmark = pytest.mark.slow
 
 
 def test_offsets_within_2_sigma_and_residuals_match_noise():
     n = 1000
-    out = col.run_trials({}, np.random.default_rng(2024), n)
+    out = sc.run_trials({}, np.random.default_rng(2024), n)
     assert np.isfinite(out["axis_az_error"]).all()
     for k in ("axis_az", "axis_el"):
         fraction = np.mean(out[f"{k}_within_2sigma"])
         print(f"{k}: within 2 sigma in {fraction:.3f} of {n} trials, MC std "
-              f"{np.std(out[f'{k}_error']) / col.ARCSEC:.2f}″, predicted "
-              f"{np.mean(out[f'{k}_sigma']) / col.ARCSEC:.2f}″")
+              f"{np.std(out[f'{k}_error']) / ARCSEC:.2f}″, predicted "
+              f"{np.mean(out[f'{k}_sigma']) / ARCSEC:.2f}″")
         assert fraction >= 0.90  # issue 6 acceptance
     ratio = np.mean(out["residual_rms_ratio"])
     print(f"mean residual RMS after / injected noise = {ratio:.3f}; expected sqrt(17/20) = "
@@ -32,7 +33,7 @@ def test_offsets_within_2_sigma_and_residuals_match_noise():
 
 def test_paper_15_arcsec_claim_under_2_arcsec_theodolite():
     """Seed 003: consistency of INS axis and optical axis within 15″ after calibration."""
-    out = col.run_trials({}, np.random.default_rng(2025), 500)
-    p95 = np.percentile(out["axis_error_angle"], 95) / col.ARCSEC
+    out = sc.run_trials({}, np.random.default_rng(2025), 500)
+    p95 = np.percentile(out["axis_error_angle"], 95) / ARCSEC
     print(f"true axis error: 95th percentile {p95:.2f}″")
     assert p95 < 15.0

@@ -5,15 +5,20 @@ import math
 import numpy as np
 import pytest
 
-from montecarlo.seed003 import model as col
 from montecarlo.discrepancy import collimation_effects as ce
-from montecarlo.discrepancy import engine as dia
+from montecarlo.discrepancy.design import TRIAL_METRICS
+from montecarlo.discrepancy.engine import analyse_candidates, canonical_correlation, diagnose
+from montecarlo.discrepancy.fit import fit_model
 from montecarlo.errors import InputError
+from montecarlo.io.collimation_csv import MirrorData, read_mirror_csv, write_mirror_csv
+from montecarlo.seed003 import model as col
+from montecarlo.systems import discrepancy as sd
+from montecarlo.units import ARCSEC
 
 LAYOUT = ce.paper_mirrors()
 TRUTH = {"frame_heading": math.radians(30.0)}
-SIGMA = math.hypot(2.0, 2.0) * col.ARCSEC
-AS = col.ARCSEC
+SIGMA = math.hypot(2.0, 2.0) * ARCSEC
+AS = ARCSEC
 
 
 def test_reduces_to_seed003_model():
@@ -21,7 +26,7 @@ def test_reduces_to_seed003_model():
     params = {"frame_heading": 0.5, "axis_az": 100 * AS, "axis_el": -50 * AS,
               "frame_tilt_x": 20 * AS, "frame_tilt_y": -10 * AS}
     roll = np.linspace(-0.01, 0.01, LAYOUT.theodolite_az.size)
-    data = ce.MirrorData(LAYOUT.mirror, LAYOUT.sets, LAYOUT.theodolite_az, LAYOUT.theodolite_el,
+    data = MirrorData(LAYOUT.mirror, LAYOUT.sets, LAYOUT.theodolite_az, LAYOUT.theodolite_el,
                          LAYOUT.ins_az, LAYOUT.ins_el, roll)
     got = ce.predict_readings(params, data, 0.3)
     expected = col.predict_readings(params, LAYOUT.theodolite_az, LAYOUT.theodolite_el, roll)
@@ -55,8 +60,8 @@ def test_simulation_without_noise_is_fitted_exactly():
 
 def base_tests(model=()):
     problem = ce.exact_problem(LAYOUT, TRUTH, SIGMA)
-    fit = dia.fit_model(problem, model, TRUTH)
-    return {t.name: t for t in dia.analyse_candidates(problem, fit)}
+    fit = fit_model(problem, model, TRUTH)
+    return {t.name: t for t in analyse_candidates(problem, fit)}
 
 
 def test_collimation_and_ins_bias_are_absorbed_by_the_paper_model():
@@ -76,8 +81,8 @@ def test_base_model_confounds_collimation_with_the_axis():
     assert tests["ins_bias"].active == ("ins_pitch_bias",)
     assert tests["theodolite_collimation"].status == "testable"
     axis = tests["axis_misalignment"]
-    assert dia.canonical_correlation(axis, tests["theodolite_collimation"]) > 0.999
-    assert dia.canonical_correlation(axis, tests["ins_bias"]) > 0.999
+    assert canonical_correlation(axis, tests["theodolite_collimation"]) > 0.999
+    assert canonical_correlation(axis, tests["ins_bias"]) > 0.999
 
 
 def test_paper_like_axis_offsets_are_named_and_corrected():
@@ -85,7 +90,7 @@ def test_paper_like_axis_offsets_are_named_and_corrected():
     within 3 sigma, the collimation and the INS bias reported absorbed."""
     truth = {**TRUTH, "axis_az": math.radians(0.05), "axis_el": math.radians(-0.03)}
     data = ce.simulate(LAYOUT, truth, col.Noise(), 7)
-    d = dia.diagnose(ce.collimation_problem(data, SIGMA))
+    d = diagnose(ce.collimation_problem(data, SIGMA))
     assert d.named[0] == "axis_misalignment"
     assert {"theodolite_collimation", "ins_bias"} <= set(d.absorbed)
     for k in ("axis_az", "axis_el"):
@@ -94,20 +99,19 @@ def test_paper_like_axis_offsets_are_named_and_corrected():
 
 def test_read_mirror_csv(tmp_path):
     data = ce.simulate(LAYOUT, TRUTH, col.Noise(), 1)
-    from montecarlo.discrepancy import synth
-
     path = tmp_path / "c.csv"
-    synth.write_collimation_csv(path, data)
-    back = ce.read_mirror_csv(path)
+    write_mirror_csv(path, data)
+    back = read_mirror_csv(path, ce.min_mirrors())
     np.testing.assert_allclose(back.ins_az, data.ins_az, atol=1e-10)
     assert back.ins_roll is None
     path.write_text(path.read_text().splitlines()[0] + "\nA1,azimuth,0,0,30,0\n")
     with pytest.raises(InputError, match=r"1 data rows, at least 2 needed"):
-        ce.read_mirror_csv(path)
+        read_mirror_csv(path, ce.min_mirrors())
 
 
 def test_run_trials_contract():
-    out = ce.run_trials({"diagnose": 1, "axis_az": 60 * AS}, np.random.default_rng(1), 2)
-    assert set(out) == set(ce.METRICS)
+    out = sd.run_collimation_trials({"diagnose": 1, "axis_az": 60 * AS},
+                                    np.random.default_rng(1), 2)
+    assert set(out) == set(TRIAL_METRICS)
     assert all(v.shape == (2,) for v in out.values())
     assert np.all(out["named_any"] == 1.0)

@@ -2,8 +2,8 @@
 
 import pytest
 
-from montecarlo.io.table import read_table
 from montecarlo.errors import InputError
+from montecarlo.io.table import read_table
 
 
 def _write(tmp_path, text):

@@ -13,7 +13,19 @@ import pytest
 from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
-from montecarlo.discrepancy import engine as dia
+from montecarlo.discrepancy.design import design_mdb
+from montecarlo.discrepancy.engine import (
+    analyse_candidates,
+    canonical_correlation,
+    chi2_red_band,
+    diagnose,
+    holm,
+    log_chi2_sf,
+    log_chi2_sf_asymptotic,
+    noncentrality,
+)
+from montecarlo.discrepancy.fit import fit_model, jacobian
+from montecarlo.discrepancy.problem import Effect, Problem
 
 X = np.linspace(-1.0, 1.0, 40)
 COLUMNS = {
@@ -27,9 +39,9 @@ BOUNDS = {"quadratic": 100.0, "duplicate": 10.0, "cubic": 10.0, "near_quadratic"
           "tiny": 1e-3}
 
 
-def toy_problem(y: np.ndarray, sigma: float = 1.0) -> dia.Problem:
-    base = dia.Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
-    cands = tuple(dia.Effect(n, (f"c_{n}",), ((-BOUNDS[n], BOUNDS[n]),), (1e-3,))
+def toy_problem(y: np.ndarray, sigma: float = 1.0) -> Problem:
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    cands = tuple(Effect(n, (f"c_{n}",), ((-BOUNDS[n], BOUNDS[n]),), (1e-3,))
                   for n in COLUMNS)
 
     def residuals(v):
@@ -38,7 +50,7 @@ def toy_problem(y: np.ndarray, sigma: float = 1.0) -> dia.Problem:
         pred = p("a") + p("b") * X + sum(p(f"c_{n}") * c for n, c in COLUMNS.items())
         return (y - pred) / sigma
 
-    return dia.Problem("toy", base, cands, residuals, {"a": 0.0, "b": 0.0})
+    return Problem("toy", base, cands, residuals, {"a": 0.0, "b": 0.0})
 
 
 def chi2_of(columns, y):
@@ -53,8 +65,8 @@ def test_statistic_is_the_chi2_drop_of_the_refit():
     rng = np.random.default_rng(1)
     y = 0.3 + 0.5 * X + 0.8 * X**2 + rng.standard_normal(X.size)
     problem = toy_problem(y)
-    fit = dia.fit_model(problem, ())
-    tests = {t.name: t for t in dia.analyse_candidates(problem, fit)}
+    fit = fit_model(problem, ())
+    tests = {t.name: t for t in analyse_candidates(problem, fit)}
     chi2_base, _ = chi2_of([np.ones_like(X), X], y)
     assert fit.chi2 == pytest.approx(chi2_base, rel=1e-9)
     for name in ("quadratic", "cubic", "near_quadratic"):
@@ -71,8 +83,8 @@ def test_statistic_is_the_chi2_drop_of_the_refit():
 def test_absorbed_undetectable_and_correlation():
     y = 0.3 + 0.5 * X
     problem = toy_problem(y)
-    fit = dia.fit_model(problem, ())
-    tests = {t.name: t for t in dia.analyse_candidates(problem, fit)}
+    fit = fit_model(problem, ())
+    tests = {t.name: t for t in analyse_candidates(problem, fit)}
     assert tests["duplicate"].status == "absorbed"
     assert tests["duplicate"].absorbed_by == {"c_duplicate": ["b"]}
     assert tests["duplicate"].retained["c_duplicate"] < 1e-6
@@ -83,18 +95,18 @@ def test_absorbed_undetectable_and_correlation():
     g1, g2 = (c - Q @ (Q.T @ c) for c in (COLUMNS["quadratic"], COLUMNS["near_quadratic"]))
     cosine = abs(g1 @ g2) / (np.linalg.norm(g1) * np.linalg.norm(g2))
     assert cosine > 0.9
-    assert dia.canonical_correlation(tests["quadratic"], tests["near_quadratic"]) == \
+    assert canonical_correlation(tests["quadratic"], tests["near_quadratic"]) == \
         pytest.approx(cosine, rel=1e-9)
-    assert dia.canonical_correlation(tests["quadratic"], tests["cubic"]) < 1e-9
+    assert canonical_correlation(tests["quadratic"], tests["cubic"]) < 1e-9
 
 
 def test_mdb_has_noncentrality_lambda0():
     """|Gbar mdb|^2 = lambda0 = max(global test, Bonferroni candidate test) at power 0.8."""
     problem = toy_problem(0.3 + 0.5 * X)
-    fit = dia.fit_model(problem, ())
-    tests = {t.name: t for t in dia.analyse_candidates(problem, fit)}
+    fit = fit_model(problem, ())
+    tests = {t.name: t for t in analyse_candidates(problem, fit)}
     family = sum(t.status in ("testable", "undetectable") for t in tests.values())
-    lam0 = max(dia.noncentrality(0.01, X.size - 2), dia.noncentrality(0.01 / family, 1))
+    lam0 = max(noncentrality(0.01, X.size - 2), noncentrality(0.01 / family, 1))
     Q = np.linalg.qr(np.column_stack([np.ones_like(X), X]))[0]
     g = COLUMNS["quadratic"] - Q @ (Q.T @ COLUMNS["quadratic"])
     t = tests["quadratic"]
@@ -104,8 +116,8 @@ def test_mdb_has_noncentrality_lambda0():
 
 def test_noncentrality_reproduces_baardas_lambda0():
     """Baarda (1968): alpha0 = 0.1 %, beta0 = 80 %, one dimension -> lambda0 = 17.075."""
-    assert dia.noncentrality(0.001, 1, 0.80) == pytest.approx(17.075, abs=2e-3)
-    lam = dia.noncentrality(0.01, 5, 0.9)
+    assert noncentrality(0.001, 1, 0.80) == pytest.approx(17.075, abs=2e-3)
+    lam = noncentrality(0.01, 5, 0.9)
     assert stats.ncx2.sf(stats.chi2.isf(0.01, 5), 5, lam) == pytest.approx(0.9, abs=1e-8)
 
 
@@ -114,7 +126,7 @@ def test_holm_matches_statsmodels():
     for m in (1, 2, 7, 20):
         p = rng.uniform(0, 0.05, m) ** rng.uniform(0.5, 3, m)
         expected = multipletests(p, alpha=0.01, method="holm")[1]
-        np.testing.assert_allclose(dia.holm(p), expected, rtol=1e-12)
+        np.testing.assert_allclose(holm(p), expected, rtol=1e-12)
 
 
 @pytest.mark.parametrize("dof", [1, 2, 3, 6])
@@ -122,9 +134,9 @@ def test_log_chi2_sf_tail_series_matches_scipy(dof):
     """The asymptotic tail used past scipy's underflow agrees where both are finite."""
     for x in (800.0, 1100.0, 1400.0):
         exact = stats.chi2.logsf(x, dof)
-        assert dia._log_chi2_sf_asymptotic(x, dof) == pytest.approx(exact, rel=1e-7)
-    assert np.isfinite(dia.log_chi2_sf(1e5, 2))
-    assert dia.log_chi2_sf(1e5, 1) < dia.log_chi2_sf(1e5, 2)
+        assert log_chi2_sf_asymptotic(x, dof) == pytest.approx(exact, rel=1e-7)
+    assert np.isfinite(log_chi2_sf(1e5, 2))
+    assert log_chi2_sf(1e5, 1) < log_chi2_sf(1e5, 2)
 
 
 def test_statistic_is_chi2_under_the_model():
@@ -135,8 +147,8 @@ def test_statistic_is_chi2_under_the_model():
     for _ in range(600):
         y = 0.3 + 0.5 * X + rng.standard_normal(X.size)
         problem = toy_problem(y)
-        fit = dia.fit_model(problem, ())
-        t = next(t for t in dia.analyse_candidates(problem, fit) if t.name == "quadratic")
+        fit = fit_model(problem, ())
+        t = next(t for t in analyse_candidates(problem, fit) if t.name == "quadratic")
         p.append(t.p_value)
         rejected += fit.p_value < 0.05
     assert stats.kstest(p, "uniform").pvalue > 1e-3
@@ -145,7 +157,7 @@ def test_statistic_is_chi2_under_the_model():
 
 def test_jacobian_equals_the_columns():
     problem = toy_problem(np.zeros_like(X))
-    J = dia.jacobian(problem, {"a": 0.1, "b": 0.2}, ["a", "b", "c_cubic"])
+    J = jacobian(problem, {"a": 0.1, "b": 0.2}, ["a", "b", "c_cubic"])
     np.testing.assert_allclose(J, np.column_stack([np.ones_like(X), X, X**3]), atol=1e-9)
 
 
@@ -161,10 +173,10 @@ def partner_separated(y):
 @pytest.mark.parametrize(("multiple", "seed"), [(1.5, 5), (1.5, 6), (1.5, 7), (12.0, 5)])
 def test_diagnose_names_the_injected_column_and_its_confounded_partner(multiple, seed):
     problem = toy_problem(np.zeros_like(X))
-    mdb = dia.design_mdb(problem, {"a": 0.0, "b": 0.0}, (), "quadratic")["c_quadratic"]
+    mdb = design_mdb(problem, {"a": 0.0, "b": 0.0}, (), "quadratic")["c_quadratic"]
     rng = np.random.default_rng(seed)
     y = 0.3 + 0.5 * X + multiple * mdb * X**2 + rng.standard_normal(X.size)
-    d = dia.diagnose(toy_problem(y))
+    d = diagnose(toy_problem(y))
     assert d.detected and not d.unexplained
     assert d.named == ["quadratic"]
     separated = partner_separated(y)
@@ -178,7 +190,7 @@ def test_diagnose_names_the_injected_column_and_its_confounded_partner(multiple,
 
 def test_null_data_name_nothing():
     rng = np.random.default_rng(8)
-    d = dia.diagnose(toy_problem(0.3 + 0.5 * X + rng.standard_normal(X.size)))
+    d = diagnose(toy_problem(0.3 + 0.5 * X + rng.standard_normal(X.size)))
     assert not d.detected and d.named == [] and d.before is d.after
     assert d.after.chi2_red == pytest.approx(d.before.chi2 / (X.size - 2))
 
@@ -186,26 +198,26 @@ def test_null_data_name_nothing():
 def test_design_mdb_along_a_direction():
     """For a two-parameter candidate the injection along a direction has noncentrality
     lambda0, computed independently with numpy."""
-    base = dia.Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
-    curve = dia.Effect("curve", ("q", "c"), ((-10.0, 10.0),) * 2, (1e-3,) * 2,
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    curve = Effect("curve", ("q", "c"), ((-10.0, 10.0),) * 2, (1e-3,) * 2,
                        direction=(1.0, -2.0))
 
     def residuals(v):
         a, b, q, c = (np.asarray(v.get(k, 0.0), float) for k in ("a", "b", "q", "c"))
         return -(a + b * X + q * X**2 + c * X**3)
 
-    problem = dia.Problem("toy", base, (curve,), residuals, {"a": 0.0, "b": 0.0})
-    inj = dia.design_mdb(problem, {}, (), "curve")
+    problem = Problem("toy", base, (curve,), residuals, {"a": 0.0, "b": 0.0})
+    inj = design_mdb(problem, {}, (), "curve")
     assert inj["c"] == pytest.approx(-2.0 * inj["q"])
     Q = np.linalg.qr(np.column_stack([np.ones_like(X), X]))[0]
     g = inj["q"] * X**2 + inj["c"] * X**3
     g -= Q @ (Q.T @ g)
-    lam0 = max(dia.noncentrality(0.01, X.size - 2), dia.noncentrality(0.01, 2))
+    lam0 = max(noncentrality(0.01, X.size - 2), noncentrality(0.01, 2))
     assert g @ g == pytest.approx(lam0, rel=1e-7)
 
 
 def test_chi2_red_band():
-    lo, hi = dia.chi2_red_band(50)
+    lo, hi = chi2_red_band(50)
     assert stats.chi2.cdf(50 * lo, 50) == pytest.approx(0.005)
     assert stats.chi2.cdf(50 * hi, 50) == pytest.approx(0.995)
 
@@ -214,8 +226,8 @@ def test_influence_is_the_shift_an_undetected_bias_causes():
     """External reliability: noise-free data with the cubic at its MDB, fitted by the line
     alone, move (a, b) by exactly the reported influence."""
     problem = toy_problem(np.zeros_like(X))
-    fit = dia.fit_model(problem, ())
-    t = next(t for t in dia.analyse_candidates(problem, fit) if t.name == "cubic")
+    fit = fit_model(problem, ())
+    t = next(t for t in analyse_candidates(problem, fit) if t.name == "cubic")
     y = 0.3 + 0.5 * X + t.mdb["c_cubic"] * X**3
     _, coef = chi2_of([np.ones_like(X), X], y)
     assert t.influence["b"] == pytest.approx(abs(coef[1] - 0.5), rel=1e-6)
@@ -225,7 +237,7 @@ def test_influence_is_the_shift_an_undetected_bias_causes():
 def test_estimate_beyond_its_physical_bound_stays_at_the_bound():
     """A signal the bounded effect cannot explain: named, pinned at the bound, misfit left."""
     y = 0.3 + 0.5 * X + 150.0 * X**2 + np.random.default_rng(2).standard_normal(X.size)
-    d = dia.diagnose(toy_problem(y))
+    d = diagnose(toy_problem(y))
     assert d.named[0] == "quadratic"
     assert d.after.params["c_quadratic"] == pytest.approx(100.0, rel=1e-6)
     assert d.unexplained

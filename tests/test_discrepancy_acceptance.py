@@ -1,4 +1,4 @@
-"""Acceptance of the discrepancy workflow (issue 5).
+"""Acceptance of the discrepancy workflow.
 
 Fast tests: a few dozen data sets of the realistic layouts (36 targets over the field at 50 and
 100 m; seed 003's 7 + 7 mirrors). Tolerances come from binomial tails: with a true rate of
@@ -6,38 +6,38 @@ Fast tests: a few dozen data sets of the realistic layouts (36 targets over the 
 fewer than 16 of 20 happen with probability 1.6 %.
 
 Slow tests (``-m slow``): the full acceptance, 500 data sets per scenario through the study
-runner (``python -m montecarlo.discrepancy_acceptance`` prints the same table).
+runner (``python -m montecarlo.tools.acceptance`` prints the same table).
 """
 
 import numpy as np
 import pytest
 
-from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.systems import discrepancy as sd
 from montecarlo.tools import acceptance as acc
-from montecarlo.discrepancy import ground_effects as ge
 
 
-def rates(module, n, seed, **params):
-    out = module.run_trials({"diagnose": 1, **params}, np.random.default_rng(seed), n)
+def rates(run_trials, n, seed, **params):
+    out = run_trials({"diagnose": 1, **params}, np.random.default_rng(seed), n)
     return {k: np.nanmean(v) if np.isfinite(v).any() else np.nan for k, v in out.items()}, out
 
 
 def test_ground_null_names_nothing_and_never_the_atmosphere():
-    r, out = rates(ge, 40, 1)
+    r, out = rates(sd.run_ground_trials, 40, 1)
     assert np.count_nonzero(out["named_any"]) <= 2
     assert r["named_watched"] == 0.0
 
 
 def test_ground_effect_at_1p5_mdb_is_named():
-    _, out = rates(ge, 20, 2, expected="radial_distortion", inject_mdb=1.5)
+    _, out = rates(sd.run_ground_trials, 20, 2, expected="radial_distortion", inject_mdb=1.5)
     assert np.count_nonzero(out["named_expected_or_group"]) >= 16
     assert np.count_nonzero(out["chi2_red_after_in_band"]) >= 16
 
 
 def test_collimation_null_and_confounded_collimation():
-    _, out = rates(ce, 40, 3)
+    _, out = rates(sd.run_collimation_trials, 40, 3)
     assert np.count_nonzero(out["named_any"]) <= 2
-    _, out = rates(ce, 20, 4, expected="theodolite_collimation", inject_mdb=1.5)
+    _, out = rates(sd.run_collimation_trials, 20, 4, expected="theodolite_collimation",
+                   inject_mdb=1.5)
     assert np.count_nonzero(out["named_expected_or_group"]) >= 16
 
 

@@ -7,10 +7,10 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from montecarlo.geometry import camera as cam
-from montecarlo.seed000 import ground
 from montecarlo.geometry.camera import Camera
 from montecarlo.geometry.invalid import Invalid
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed000 import ground
 
 CAMERA = Camera.from_degrees(90.0, 90.0, 512, 512)
 TRUE = tuple(np.radians([30.0, 20.0, 10.0]))

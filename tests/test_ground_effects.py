@@ -6,15 +6,26 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from montecarlo.discrepancy import engine as dia
-from montecarlo.seed000 import ground
 from montecarlo.discrepancy import ground_effects as ge
-from montecarlo.geometry.camera import Camera
+from montecarlo.discrepancy.design import TRIAL_METRICS
+from montecarlo.discrepancy.engine import analyse_candidates, canonical_correlation, diagnose
+from montecarlo.discrepancy.fit import fit_model
 from montecarlo.errors import InputError
+from montecarlo.geometry.camera import Camera
+from montecarlo.io.ground_csv import GroundData, read_ground_csv, write_ground_csv
+from montecarlo.seed000 import ground
+from montecarlo.systems import discrepancy as sd
 
 CAM = Camera.from_degrees(90.0, 90.0, 512, 512)
 MOUNT = dict(ge.DEFAULT_MOUNTING)
-LAYOUT = ge.default_layout(CAM, MOUNT)
+LAYOUT = sd.default_layout(CAM, MOUNT)
+
+
+def read_ground_checked(path):
+    """Read a ground CSV as ``montecarlo diagnose ground`` does: format, then geometry."""
+    data = read_ground_csv(path, CAM, ge.min_targets())
+    ge.check_in_front(data, CAM, str(path))
+    return data
 
 
 def predict(params, layout=LAYOUT, camera=CAM):
@@ -22,7 +33,7 @@ def predict(params, layout=LAYOUT, camera=CAM):
 
 
 def moved(layout, positions):
-    return ge.GroundData(layout.targets, positions, layout.pixels, layout.t, layout.session)
+    return GroundData(layout.targets, positions, layout.pixels, layout.t, layout.session)
 
 
 def test_base_model_equals_seed000_trigonometric_route():
@@ -111,7 +122,7 @@ def test_drift_is_linear_in_time_about_the_mean_epoch():
     dt = LAYOUT.t - LAYOUT.t.mean()
     for i in (0, 7, 20):
         angles = {k: MOUNT[k] + w[j] * dt[i] for j, k in enumerate(("psi", "theta", "gamma"))}
-        one = ge.GroundData(LAYOUT.targets[i:i + 1], LAYOUT.positions[i:i + 1],
+        one = GroundData(LAYOUT.targets[i:i + 1], LAYOUT.positions[i:i + 1],
                             LAYOUT.pixels[i:i + 1])
         np.testing.assert_allclose(got[i], ge.predict_pixels(angles, one, CAM)[0], rtol=1e-12)
 
@@ -125,7 +136,7 @@ def test_batched_parameters_equal_single_evaluations():
 
 
 def test_initial_mounting_recovers_the_truth_from_exact_data():
-    data = ge.GroundData(LAYOUT.targets, LAYOUT.positions, predict({}), LAYOUT.t)
+    data = GroundData(LAYOUT.targets, LAYOUT.positions, predict({}), LAYOUT.t)
     start = ge.initial_mounting(data, CAM)
     for k in ("psi", "theta", "gamma"):
         assert start[k] == pytest.approx(MOUNT[k], abs=1e-9)
@@ -144,8 +155,8 @@ def test_pixel_covariance_propagates_the_survey_error():
 
 def analyse(layout, camera, truth=MOUNT, sigma=0.3):
     problem = ge.exact_problem(layout, camera, truth, sigma, 0.0)
-    fit = dia.fit_model(problem, ())
-    return {t.name: t for t in dia.analyse_candidates(problem, fit)}
+    fit = fit_model(problem, ())
+    return {t.name: t for t in analyse_candidates(problem, fit)}
 
 
 def test_what_the_default_layout_can_and_cannot_tell():
@@ -157,7 +168,7 @@ def test_what_the_default_layout_can_and_cannot_tell():
     assert tests["session_shift"].status == "unavailable"
     for name in ("radial_distortion", "focal_scale", "principal_point", "drift", "lever_arm"):
         assert tests[name].status == "testable"
-    assert dia.canonical_correlation(tests["target_height_bias"], tests["lever_arm"]) == \
+    assert canonical_correlation(tests["target_height_bias"], tests["lever_arm"]) == \
         pytest.approx(1.0, abs=1e-9)
 
 
@@ -177,7 +188,7 @@ def test_session_shift_with_two_sessions():
     layout = ge.field_layout(CAM, MOUNT, (50.0, 100.0), (4, 4), 0.8, 1800.0, sessions=2, rng=3)
     truth = {**MOUNT, "theta_shift_S2": 2e-3}
     data = ge.simulate(layout, CAM, truth, 0.3, 0.0, 4)
-    d = dia.diagnose(ge.ground_problem(data, CAM, 0.3))
+    d = diagnose(ge.ground_problem(data, CAM, 0.3))
     assert d.named == ["session_shift"]
     est, se = d.after.params, d.after.stderr
     assert abs(est["theta_shift_S2"] - 2e-3) < 3 * se["theta_shift_S2"]
@@ -204,8 +215,8 @@ def write(tmp_path, text):
 def test_csv_round_trip(tmp_path):
     data = ge.simulate(LAYOUT, CAM, MOUNT, 0.3, 0.01, 1)
     path = tmp_path / "g.csv"
-    ge.write_ground_csv(path, data)
-    back = ge.read_ground_csv(path, CAM)
+    write_ground_csv(path, data)
+    back = read_ground_checked(path)
     np.testing.assert_allclose(back.positions, data.positions, atol=5e-5)
     np.testing.assert_allclose(back.pixels, data.pixels, atol=5e-7)
     np.testing.assert_allclose(back.t, data.t, atol=0.05)
@@ -227,26 +238,26 @@ def test_csv_round_trip(tmp_path):
 def test_malformed_csv_is_one_line(tmp_path, body, message):
     path = write(tmp_path, body)
     with pytest.raises(InputError, match=message) as info:
-        ge.read_ground_csv(path, CAM)
+        read_ground_checked(path)
     assert "\n" not in str(info.value) and str(path) in str(info.value)
 
 
 def test_run_trials_contract():
     rng = np.random.default_rng(0)
-    out = ge.run_trials({"diagnose": 1}, rng, 3)
-    assert set(out) == set(ge.METRICS)
+    out = sd.run_ground_trials({"diagnose": 1}, rng, 3)
+    assert set(out) == set(TRIAL_METRICS)
     assert all(v.shape == (3,) and v.dtype == np.float64 for v in out.values())
-    again = ge.run_trials({"diagnose": 1}, np.random.default_rng(0), 3)
+    again = sd.run_ground_trials({"diagnose": 1}, np.random.default_rng(0), 3)
     for k in out:
         np.testing.assert_array_equal(out[k], again[k])
     with pytest.raises(ValueError, match="unknown"):
-        ge.run_trials({"nope": 1.0}, rng, 1)
+        sd.run_ground_trials({"nope": 1.0}, rng, 1)
 
 
 def test_study_file_with_units_at_the_edge(tmp_path):
     """A TOML study of the registered system: keys carry units, run_trials gets SI."""
     from montecarlo.engine.runner import RunOptions, run_study
-    from montecarlo.engine.study import load_study
+    from montecarlo.systems import load_study
 
     path = tmp_path / "d.toml"
     path.write_text('[study]\nsystem = "discrepancy_ground"\ntrials = 6\nseed = 1\n'
@@ -264,7 +275,7 @@ def test_target_behind_the_sensor_is_one_line(tmp_path):
     flipped = data.positions.copy()
     flipped[4] *= -1.0
     path = tmp_path / "g.csv"
-    ge.write_ground_csv(path, ge.GroundData(data.targets, flipped, data.pixels, data.t))
+    write_ground_csv(path, GroundData(data.targets, flipped, data.pixels, data.t))
     with pytest.raises(InputError, match=r"row 6, columns 'x_m', 'y_m', 'z_m': the target is "
                                          r"behind the sensor"):
-        ge.read_ground_csv(path, CAM)
+        read_ground_checked(path)

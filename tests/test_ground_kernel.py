@@ -7,12 +7,12 @@ import pandas as pd
 import pytest
 
 from montecarlo.engine import aggregate as agg
-from montecarlo.seed000 import ground
-from montecarlo.seed000 import ground_kernel as gk
+from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.geometry.camera import Camera
 from montecarlo.geometry.rotations import mounting_matrix
-from montecarlo.engine.runner import RunOptions, run_study
-from montecarlo.engine.study import load_study
+from montecarlo.seed000 import ground
+from montecarlo.seed000 import ground_kernel as gk
+from montecarlo.systems import load_study
 
 TOL = 1e-12  # [rad]
 ARCCOS_METRICS = ("eq18_angle", "table1_angle")
@@ -98,26 +98,6 @@ def test_kernel_invalid_paths_match_reference():
     assert {0, 8, 16} <= seen and seen & {32, 64, 96, 128}  # several reasons exercised
 
 
-def test_accumulate_equals_reference_aggregation():
-    rng = np.random.default_rng(5)
-    values = rng.lognormal(-7, 1, (3, 20000)) * rng.choice([-1, 1], (3, 20000))
-    values[:, ::13] = np.nan
-    hist = np.zeros((3, agg.N_BINS), np.int64)
-    stats = gk.new_stats(3)
-    for s in range(0, 20000, 8192):
-        chunk = np.ascontiguousarray(values[:, s:s + 8192])
-        gk.accumulate(chunk, np.arange(3), hist, stats, np.empty(chunk.shape[1], np.int64))
-    for r in range(3):
-        ref = agg.MetricStats()
-        ref.add_block(0, values[r])
-        np.testing.assert_array_equal(hist[r], ref.hist)
-        n, mean, m2 = ref.blocks[0]
-        assert stats[r, 0] == n
-        assert stats[r, 1] == pytest.approx(mean, rel=1e-12)
-        assert stats[r, 2] == pytest.approx(m2, rel=1e-10)
-        assert (stats[r, 3], stats[r, 4]) == (ref.minimum, ref.maximum)
-
-
 def test_runner_fast_path_agrees_with_reference_path(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(textwrap.dedent("""
@@ -160,7 +140,7 @@ def test_runner_fast_path_agrees_with_reference_path(tmp_path):
 def test_block_drawn_in_pieces_equals_block_drawn_at_once(tmp_path, relation):
     """The fast path draws each block in sub-chunks; the reference path all at once."""
     from montecarlo.engine.distributions import Streams
-    from montecarlo.engine.study import study_from_dict
+    from montecarlo.systems import study_from_dict
 
     raw = {"study": {"system": "ground", "trials": 10000, "seed": 3},
            "sensor": {"fov_deg": [60.0, 60.0], "pixels": [512, 512]},

@@ -6,8 +6,8 @@ import textwrap
 import pandas as pd
 import pytest
 
-from montecarlo.output import outputs
 from montecarlo.cli import main
+from montecarlo.output import outputs
 
 STUDY = """
 [study]

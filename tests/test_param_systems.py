@@ -6,10 +6,12 @@ import textwrap
 import numpy as np
 import pytest
 
-from montecarlo.errors import InputError
-from montecarlo.systems.params import ARCSEC, COLLIMATION, UNITS
 from montecarlo.engine.runner import RunOptions, run_study
-from montecarlo.engine.study import load_study
+from montecarlo.errors import InputError
+from montecarlo.systems import load_study
+from montecarlo.systems.collimation import COLLIMATION
+from montecarlo.units import ARCSEC
+from montecarlo.units import SUFFIXES as UNITS
 
 AIR = """
 [study]

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from montecarlo.seed000 import table1
 from montecarlo.engine.runner import RunOptions, run_study
-from montecarlo.engine.study import load_study
+from montecarlo.seed000 import table1
+from montecarlo.systems import load_study
 
 ROOT = Path(__file__).parent.parent
 

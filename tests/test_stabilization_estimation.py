@@ -10,12 +10,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from montecarlo.seed001 import kinematics as st
+from montecarlo.io import stabilization_csv as scsv
 from montecarlo.seed001 import estimate as se
+from montecarlo.seed001 import kinematics as kin
+from montecarlo.seed001 import linear_model as lin
+from montecarlo.seed001 import simulate as sim
+from montecarlo.systems import stabilization as ss
 
 D = np.pi / 180.0
-ROCK = st.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
-SETUP = st.Setup(duration=20.0, rate=50.0, aim_azimuth=20 * D, aim_pitch=10 * D,
+ROCK = kin.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
+SETUP = sim.Setup(duration=20.0, rate=50.0, aim_azimuth=20 * D, aim_pitch=10 * D,
                  image_noise=0.1, gyro_noise=np.radians(0.01) / 60.0)
 QUIET = dataclasses.replace(SETUP, gyro_noise=0.0, image_noise=0.0)
 DELTA_G = np.array([0.5, -0.3, 0.7]) * D
@@ -33,21 +37,21 @@ def test_carrier_attitude_from_sampled_rate_matches_the_rocking():
 
 
 def test_exact_predictor_reproduces_the_simulator():
-    run = st.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=1)
+    run = sim.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=1)
     predicted = se.predict_los(run.t, run.gyro, run.eta, run.eps, TRUTH, SETUP.camera)
     # gyro noise is in both the loop and the rebuilt carrier; what is left is the LOS walk
     walk = SETUP.gyro_noise * np.sqrt(SETUP.duration) * SETUP.camera.k_x
     assert np.abs(predicted - run.los_px_true).max() < 5 * walk
-    quiet = st.simulate(ROCK, QUIET, DELTA_G, DELTA_P, BIAS)
+    quiet = sim.simulate(ROCK, QUIET, DELTA_G, DELTA_P, BIAS)
     predicted = se.predict_los(quiet.t, quiet.gyro, quiet.eta, quiet.eps, TRUTH, SETUP.camera)
     assert np.abs(predicted - quiet.los_px_true).max() < 1e-4
 
 
 def test_exact_jacobian_at_zero_is_the_first_order_drift_model():
     """Two independent routes: derivatives of the exact predictor and the integrated eq. (6)."""
-    run = st.simulate(ROCK, QUIET, 0.0, 0.0)
+    run = sim.simulate(ROCK, QUIET, 0.0, 0.0)
     J = se.los_jacobian(run.t, run.gyro, run.eta, run.eps, np.zeros(8), SETUP.camera)
-    M = st.drift_matrix(run.t, run.gyro, run.eta, run.eps, SETUP.camera)
+    M = lin.drift_matrix(run.t, run.gyro, run.eta, run.eps, SETUP.camera)
     for j, k in enumerate([0, 1, 2, 3, 5, 6, 7]):
         assert np.abs(J[..., k] - M[..., j]).max() < 1e-3 * np.abs(M[..., j]).max()
     # the camera roll only turns the drift, which is zero about zero
@@ -81,7 +85,7 @@ def test_rls_with_random_walk_equals_batch_generalised_least_squares():
     """The walk state: compare with the explicit covariance of the accumulated increments."""
     n, p = 25, 2
     g, rows, _ = _problem(n, p, seed=1)
-    F = st.plane_rotation(g.uniform(-0.1, 0.1, n))
+    F = lin.plane_rotation(g.uniform(-0.1, 0.1, n))
     q = g.uniform(0.01, 0.05, (n, 2))
     obs = g.normal(size=(n, 2))
     r = 0.04
@@ -127,7 +131,7 @@ def test_forgetting_factor_follows_a_changed_parameter():
 def test_estimate_recovers_the_angles_from_exact_kinematics():
     """Iterated RLS: each parameter within 3 sigma (fixed seed); the patent's single linear
     pass is off by more than 5 sigma (second-order terms) but within 5 % for these angles."""
-    run = st.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=11)
+    run = sim.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=11)
     est = se.estimate_record(run, SETUP)
     assert est.converged and est.passes <= 6
     z = (est.values - TRUTH) / est.sigma
@@ -140,10 +144,10 @@ def test_estimate_recovers_the_angles_from_exact_kinematics():
 
 
 def test_csv_round_trip_gives_the_same_estimate(tmp_path):
-    run = st.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=12)
+    run = sim.simulate(ROCK, SETUP, DELTA_G, DELTA_P, BIAS, rng=12)
     path = tmp_path / "run.csv"
-    st.write_csv(path, run)
-    back = st.read_csv(path)
+    scsv.write_csv(path, run)
+    back = scsv.read_csv(path)
     np.testing.assert_allclose(back.gyro, run.gyro, rtol=1e-11)
     a = se.estimate_record(run, SETUP)
     b = se.estimate_record(back, SETUP)
@@ -153,13 +157,13 @@ def test_csv_round_trip_gives_the_same_estimate(tmp_path):
 
 def test_run_trials_is_deterministic_and_checks_keys():
     params = {"duration": 4.0, "rate": 25.0}
-    a = se.run_trials(params, np.random.default_rng(5), 2)
-    b = se.run_trials(params, np.random.default_rng(5), 2)
+    a = ss.run_trials(params, np.random.default_rng(5), 2)
+    b = ss.run_trials(params, np.random.default_rng(5), 2)
     assert set(a) == set(b) and all(v.shape == (2,) and v.dtype == np.float64 for v in a.values())
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
     with pytest.raises(KeyError, match="rock_amplitud"):
-        se.run_trials({"rock_amplitud": 0.1}, np.random.default_rng(0), 1)
+        ss.run_trials({"rock_amplitud": 0.1}, np.random.default_rng(0), 1)
 
 
 def _acceptance(out):
@@ -177,7 +181,7 @@ def test_small_monte_carlo():
     that 24 trials give 19 or fewer is 0.5 %, so the bound 20/24 fails a biased estimator,
     not a correct one.
     """
-    out = se.run_trials({"duration": 20.0, "rate": 50.0}, np.random.default_rng(7), 24)
+    out = ss.run_trials({"duration": 20.0, "rate": 50.0}, np.random.default_rng(7), 24)
     assert not np.isnan(out["accepted"]).any()
     two_sigma, five_pct = _acceptance(out)
     assert np.all(two_sigma >= 20 / 24), two_sigma
@@ -195,7 +199,7 @@ def test_acceptance_monte_carlo():
     trials can exceed it: after compensation the error is the LOS walk of gyro noise, about
     0.08 arcmin RMS here, which no calibration removes; see docs/stabilization.md).
     """
-    out = se.run_trials({}, np.random.default_rng(20130417), 300)
+    out = ss.run_trials({}, np.random.default_rng(20130417), 300)
     assert np.isnan(out["accepted"]).sum() == 0
     two_sigma, five_pct = _acceptance(out)
     assert np.all(two_sigma >= 0.90), two_sigma

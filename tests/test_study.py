@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from montecarlo.cli import main
-from montecarlo.engine.study import load_study
+from montecarlo.systems import load_study
 
 STUDIES = sorted(Path(__file__).parent.parent.glob("studies/*.toml"))
 

@@ -43,11 +43,6 @@ from matplotlib.figure import Figure
 from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
-from montecarlo.seed000 import ground
-from montecarlo.engine.distributions import Distribution
-from montecarlo.errors import InputError
-from montecarlo.systems.ground import MOUNTING_SOURCES, PLACEMENT_SOURCES, PreparedGround
-from montecarlo.output.report import markdown_table
 from montecarlo.design.sizing import (
     RELATION_TEXT,
     Requirement,
@@ -57,6 +52,11 @@ from montecarlo.design.sizing import (
     verdicts,
     write_file,
 )
+from montecarlo.engine.distributions import Distribution
+from montecarlo.errors import InputError
+from montecarlo.output.report import markdown_table
+from montecarlo.seed000 import ground
+from montecarlo.systems.ground import MOUNTING_SOURCES, PLACEMENT_SOURCES, PreparedGround
 
 SOURCE_LABELS = {
     "dx_m": "lateral placement δx",

@@ -70,10 +70,10 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.errors import InputError
 from montecarlo.output.report import markdown_table
-from montecarlo.engine.runner import RunOptions, run_study
-from montecarlo.engine.study import study_from_dict
+from montecarlo.systems import study_from_dict
 
 Cheaper = Literal["smaller", "larger"]
 RELATIONS = ("common", "independent")

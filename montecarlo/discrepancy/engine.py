@@ -44,13 +44,17 @@ J. Geodesy 92: 59-80. Holm, S. (1979), A simple sequentially rejective multiple 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, stats
+
+from montecarlo.discrepancy.fit import fit_model, jacobian
+from montecarlo.discrepancy.problem import Effect, Problem
+from montecarlo.lsq import LeastSquaresFit
 
 FloatArray = NDArray[np.float64]
 
@@ -62,204 +66,6 @@ ABSORBED = 0.05
 """A projected column keeping less than this fraction of its norm is absorbed."""
 CONFOUNDED = 0.9
 """Candidates whose statistics correlate above this form a confounded group."""
-
-
-@dataclass(frozen=True)
-class Effect:
-    """A named group of parameters of a forward model.
-
-    Attributes
-    ----------
-    name : effect name (e.g. ``"focal_scale"``).
-    parameters : parameter names, unique across the problem.
-    bounds : physical (lower, upper) bound of each parameter, in its SI unit.
-    steps : central-difference step of each parameter for the Jacobian.
-    description : one line for reports (parametrisation and units).
-    direction : relative size of the parameters for an injection "along the effect" (synthetic
-        data, acceptance runs); the diagnosis never uses it.
-    """
-
-    name: str
-    parameters: tuple[str, ...]
-    bounds: tuple[tuple[float, float], ...]
-    steps: tuple[float, ...]
-    description: str = ""
-    direction: tuple[float, ...] | None = None
-
-    def __post_init__(self) -> None:
-        k = len(self.parameters)
-        if len(self.bounds) != k or len(self.steps) != k:
-            raise ValueError(f"effect {self.name}: bounds and steps need one entry per parameter")
-        if self.direction is not None and len(self.direction) != k:
-            raise ValueError(f"effect {self.name}: direction needs one entry per parameter")
-
-
-Residuals = Callable[[Mapping[str, FloatArray]], FloatArray]
-"""Whitened residuals of named parameter values. Values are floats, or arrays of shape (k, 1)
-for k parameter vectors at once (result (k, n)); parameters not given are zero."""
-
-
-@dataclass(frozen=True)
-class Problem:
-    """Measured data, a base model and candidate effects, as the engine sees them.
-
-    Attributes
-    ----------
-    system : name for reports (``"ground"``, ``"collimation"``).
-    base : the parameters always fitted (bounds usually infinite).
-    candidates : the library of candidate effects.
-    residuals : see :data:`Residuals`; ``n_obs`` values per parameter vector.
-    start : starting values of the base parameters.
-    unavailable : candidate name -> reason it cannot be tested with these data (e.g. no time
-        column); such candidates are reported, never tested.
-    """
-
-    system: str
-    base: Effect
-    candidates: tuple[Effect, ...]
-    residuals: Residuals
-    start: Mapping[str, float]
-    unavailable: Mapping[str, str] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        names = [p for e in (self.base, *self.candidates) for p in e.parameters]
-        if len(set(names)) != len(names):
-            raise ValueError("parameter names must be unique across base and candidates")
-        effects = [e.name for e in (self.base, *self.candidates)]
-        if len(set(effects)) != len(effects):
-            raise ValueError("effect names must be unique")
-
-    def effect(self, name: str) -> Effect:
-        for e in (self.base, *self.candidates):
-            if e.name == name:
-                return e
-        raise KeyError(f"unknown effect {name!r}; known: "
-                       f"{', '.join(e.name for e in self.candidates)}")
-
-    @property
-    def parameter_effect(self) -> dict[str, Effect]:
-        return {p: e for e in (self.base, *self.candidates) for p in e.parameters}
-
-
-# --------------------------------------------------------------------------- fitting
-
-
-@dataclass(frozen=True)
-class ModelFit:
-    """Weighted least-squares fit of a model (base plus named effects).
-
-    Attributes
-    ----------
-    effects : effect names in the model, base first.
-    names, values : fitted parameters (SI units).
-    covariance : (p, p) ``(A'A)^-1`` of the whitened Jacobian (noise as stated, not rescaled).
-    residual : (n,) whitened residuals at the solution.
-    jacobian : (n, p) ``A = d(predicted, whitened)/d(parameters) = -d residual / d parameters``.
-    """
-
-    effects: tuple[str, ...]
-    names: tuple[str, ...]
-    values: FloatArray
-    covariance: FloatArray
-    residual: FloatArray
-    jacobian: FloatArray
-
-    @property
-    def params(self) -> dict[str, float]:
-        return dict(zip(self.names, self.values.tolist(), strict=True))
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        return dict(zip(self.names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
-
-    @property
-    def chi2(self) -> float:
-        return float(self.residual @ self.residual)
-
-    @property
-    def dof(self) -> int:
-        return self.residual.size - len(self.names)
-
-    @property
-    def chi2_red(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else math.nan
-
-    @property
-    def p_value(self) -> float:
-        """Global test: P(chi2(dof) >= chi2)."""
-        return float(stats.chi2.sf(self.chi2, self.dof)) if self.dof > 0 else math.nan
-
-
-class FitError(ValueError):
-    """The model cannot be fitted to these data (too few observations, singular design)."""
-
-
-def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]) -> FloatArray:
-    """Whitened design columns ``-d residual / d parameter`` by central differences, (n, k).
-
-    All ``2k`` perturbed parameter vectors go through ``problem.residuals`` in one vectorised
-    call; parameters in ``values`` but not in ``names`` are held at their values.
-    """
-    effect_of = problem.parameter_effect
-    steps = np.array([effect_of[n].steps[effect_of[n].parameters.index(n)] for n in names])
-    k = len(names)
-    batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
-    for j, n in enumerate(names):
-        column = batch.setdefault(n, np.zeros((2 * k, 1)))
-        column[j, 0] += steps[j]
-        column[k + j, 0] -= steps[j]
-    r = problem.residuals(batch)
-    return -((r[:k] - r[k:]) / (2.0 * steps[:, None])).T
-
-
-def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, float] | None = None
-              ) -> ModelFit:
-    """Fit the base model plus ``effects`` (names of candidates) by nonlinear least squares.
-
-    Candidate parameters are bounded by their physical bounds (``method="trf"``); unspecified
-    starting values are the problem's base start and zero for candidates.
-
-    Raises
-    ------
-    FitError
-        Fewer observations than parameters plus one, or a singular design.
-    """
-    model = (problem.base.name, *[e for e in effects if e != problem.base.name])
-    chosen = [problem.effect(e) for e in model]
-    names = tuple(p for e in chosen for p in e.parameters)
-    bounds = [b for e in chosen for b in e.bounds]
-    lower = np.array([b[0] for b in bounds])
-    upper = np.array([b[1] for b in bounds])
-    guess = {**problem.start, **(start or {})}
-    margin = np.where(np.isfinite(upper - lower), 1e-9 * (upper - lower), 0.0)
-    x0 = np.clip(np.array([float(guess.get(n, 0.0)) for n in names]), lower + margin,
-                 upper - margin)
-    n_obs = problem.residuals(dict(zip(names, x0, strict=True))).size
-    if n_obs < len(names) + 1:
-        raise FitError(f"{n_obs} observations cannot fit {len(names)} parameters with a "
-                       "degree of freedom left")
-
-    def fun(x: FloatArray) -> FloatArray:
-        return problem.residuals(dict(zip(names, x, strict=True)))
-
-    def jac(x: FloatArray) -> FloatArray:
-        return -jacobian(problem, dict(zip(names, x, strict=True)), names)
-
-    bounded = bool(np.isfinite(lower).any() or np.isfinite(upper).any())
-    sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lower, upper),
-                                 method="trf" if bounded else "lm", x_scale="jac",
-                                 xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
-    if not np.all(np.isfinite(sol.fun)):
-        raise FitError("the model gives no finite prediction for these data")
-    A = jacobian(problem, dict(zip(names, sol.x, strict=True)), names)
-    norms = np.linalg.norm(A, axis=0)
-    s = np.linalg.svd(A / np.where(norms > 0, norms, 1.0), compute_uv=False)
-    if norms.min() == 0.0 or s[-1] < 1e-10 * s[0]:
-        raise FitError(f"parameters of {', '.join(model)} are not separable with these data")
-    cov = np.linalg.inv(A.T @ A)
-    return ModelFit(model, names, sol.x, cov, fun(sol.x), A)
-
-
 # --------------------------------------------------------------------------- identification
 
 
@@ -305,10 +111,10 @@ def log_chi2_sf(x: float, dof: int) -> float:
     with ``a = dof/2``, ``y = x/2`` (relative error below 1e-6 there).
     """
     value = float(stats.chi2.logsf(x, dof))
-    return value if np.isfinite(value) else _log_chi2_sf_asymptotic(x, dof)
+    return value if np.isfinite(value) else log_chi2_sf_asymptotic(x, dof)
 
 
-def _log_chi2_sf_asymptotic(x: float, dof: int) -> float:
+def log_chi2_sf_asymptotic(x: float, dof: int) -> float:
     a, y = dof / 2.0, x / 2.0
     series = 1.0 + (a - 1.0) / y + (a - 1.0) * (a - 2.0) / y**2
     return (a - 1.0) * math.log(y) - y + math.log(series) - math.lgamma(a)
@@ -377,7 +183,7 @@ def _absorbed_by(column: FloatArray, A: FloatArray, names: Sequence[str]) -> lis
     return [names[i] for i in np.flatnonzero(big)]
 
 
-def analyse_candidates(problem: Problem, fit: ModelFit, alpha: float = ALPHA,
+def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
                        power: float = POWER, absorbed: float = ABSORBED
                        ) -> list[CandidateTest]:
     """Identification statistics of every candidate against the model of ``fit``.
@@ -518,7 +324,7 @@ class Step:
     """One identification step: the model tested, its fit, every candidate's statistics, the
     winner (None if nothing was significant) and its confounded partners."""
 
-    fit: ModelFit
+    fit: LeastSquaresFit
     tests: list[CandidateTest]
     winner: str | None
     group: tuple[str, ...]
@@ -542,8 +348,8 @@ class Diagnosis:
 
     problem: Problem
     alpha: float
-    before: ModelFit
-    after: ModelFit
+    before: LeastSquaresFit
+    after: LeastSquaresFit
     steps: list[Step]
     named: list[str]
     groups: list[tuple[str, ...]]
@@ -615,7 +421,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
 
 
 def _fit_with_fixed(problem: Problem, effects: Sequence[str], start: Mapping[str, float],
-                    fixed: set[str]) -> ModelFit:
+                    fixed: set[str]) -> LeastSquaresFit:
     """Fit ``effects``, holding the parameters in ``fixed`` (absorbed ones) at zero.
 
     Absorbed parameters cannot be estimated (their columns are in the model's span), so the
@@ -638,112 +444,3 @@ def chi2_red_band(dof: int, level: float = 0.99) -> tuple[float, float]:
     """Central ``level`` band of chi2(dof)/dof, the reduced chi-square of a right model."""
     lo, hi = stats.chi2.ppf([(1 - level) / 2, (1 + level) / 2], dof)
     return float(lo / dof), float(hi / dof)
-
-
-# --------------------------------------------------------------------------- design analysis
-
-
-def design_mdb(problem: Problem, truth: Mapping[str, float], model_effects: Sequence[str],
-               effect: str, direction: Sequence[float] | None = None, alpha: float = ALPHA,
-               power: float = POWER) -> dict[str, float]:
-    """Minimal detectable bias of ``effect`` along ``direction`` for noise-free data.
-
-    The problem's residuals must be those of data generated exactly by ``truth`` with
-    ``effect`` absent (so the fitted model reproduces ``truth``); the result is the injection,
-    parameter -> value, whose noncentrality against the model ``base + model_effects`` equals
-    the chain's ``lambda0`` (MDB along ``direction``, default the effect's own direction).
-    Parameters the model absorbs get zero.
-
-    Raises
-    ------
-    ValueError
-        The effect is absorbed, unavailable or without effect with this design.
-    """
-    start = {k: v for k, v in truth.items()}
-    fit = fit_model(problem, model_effects, start)
-    test = next(t for t in analyse_candidates(problem, fit, alpha, power) if t.name == effect)
-    if test.status not in ("testable", "undetectable"):
-        raise ValueError(f"{effect} is {test.status} with this design ({test.reason})")
-    e = problem.effect(effect)
-    d = np.array(direction if direction is not None else (e.direction or (1.0,) * len(
-        e.parameters)), float)
-    d = np.array([d[e.parameters.index(p)] for p in test.active])
-    v = test.projected @ d
-    scale = math.sqrt(test.lambda0 / float(v @ v))
-    out = dict.fromkeys(e.parameters, 0.0)
-    out.update({p: float(scale * x) for p, x in zip(test.active, d, strict=True)})
-    return out
-
-
-def inject_at_mdb(exact_problem: Callable[[Mapping[str, float]], Problem],
-                  truth: Mapping[str, float], effect: str, multiple: float,
-                  alpha: float = ALPHA) -> dict[str, float]:
-    """``truth`` with ``effect`` set to ``multiple`` times its MDB along its default direction.
-
-    ``exact_problem(truth)`` must build the problem of noise-free data generated by ``truth``.
-    The MDB is the design's (:func:`design_mdb`) against the model base + the other effects
-    present in ``truth`` that the design can detect (the diagnosis adapts those first).
-    """
-    own = set(exact_problem(truth).effect(effect).parameters)
-    base = {k: (0.0 if k in own else v) for k, v in truth.items()}
-    design = exact_problem(base)
-    present = {c.name for c in design.candidates if c.name != effect
-               and any(base.get(q, 0.0) != 0.0 for q in c.parameters)}
-    tests = analyse_candidates(design, fit_model(design, (), base), alpha)
-    context = [t.name for t in tests if t.name in present and t.status == "testable"]
-    mdb = design_mdb(design, base, context, effect, alpha=alpha)
-    return {**base, **{k: multiple * v for k, v in mdb.items()}}
-
-
-# --------------------------------------------------------------------------- Monte Carlo
-
-
-TRIAL_METRICS = ("chi2", "chi2_red", "p_value", "rms", "detected", "named_any", "n_named",
-                 "named_expected", "named_expected_or_group", "named_watched",
-                 "expected_within_2sigma", "expected_all_within_2sigma", "chi2_red_after",
-                 "chi2_red_after_in_band")
-"""Per-trial metrics of :func:`score_trials` (see the study hooks' ``run_trials``)."""
-
-
-def score_trials(make_data: Callable[[np.random.Generator], object],
-                 make_problem: Callable[[object], Problem],
-                 rms_of: Callable[[object, ModelFit], float], truth: Mapping[str, float],
-                 effects: Sequence[str], diagnose_too: bool, expected: str, alpha: float,
-                 rng: np.random.Generator, n: int, watched: Sequence[str] = ()
-                 ) -> dict[str, FloatArray]:
-    """Simulate ``n`` data sets; fit ``effects`` to each and optionally diagnose it.
-
-    Returns the metrics of :data:`TRIAL_METRICS`, shape (n,), NaN where not applicable (a fit
-    that fails leaves the whole trial NaN). ``truth`` scores ``expected_within_2sigma``;
-    ``watched`` effects are counted in ``named_watched``. The diagnosis sees only the data.
-    """
-    out = {k: np.full(n, np.nan) for k in TRIAL_METRICS}
-    for i in range(n):
-        data = make_data(rng)
-        problem = make_problem(data)
-        try:
-            fit = fit_model(problem, effects)
-        except FitError:
-            continue
-        out["chi2"][i], out["chi2_red"][i] = fit.chi2, fit.chi2_red
-        out["p_value"][i], out["rms"][i] = fit.p_value, rms_of(data, fit)
-        if not diagnose_too:
-            continue
-        d = diagnose(problem, alpha)
-        out["detected"][i] = float(d.detected)
-        out["named_any"][i] = float(bool(d.named))
-        out["n_named"][i] = len(d.named)
-        out["named_watched"][i] = float(any(e in d.named for e in watched))
-        out["chi2_red_after"][i] = d.after.chi2_red
-        lo, hi = chi2_red_band(d.after.dof)
-        out["chi2_red_after_in_band"][i] = float(lo <= d.after.chi2_red <= hi)
-        if expected:
-            out["named_expected"][i] = float(expected in d.named)
-            out["named_expected_or_group"][i] = float(any(expected in g for g in d.groups))
-            if expected in d.named:
-                est, se = d.after.params, d.after.stderr
-                inside = [abs(est[q] - truth.get(q, 0.0)) <= 2.0 * se[q]
-                          for q in problem.effect(expected).parameters if q in est]
-                out["expected_within_2sigma"][i] = float(np.mean(inside))
-                out["expected_all_within_2sigma"][i] = float(all(inside))
-    return out

@@ -38,21 +38,18 @@ import json
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-from montecarlo.discrepancy import engine as dia
-from montecarlo.geometry.camera import Camera, direction_from_pixels, pixels_from_direction
-from montecarlo.io.table import read_table
+from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.errors import InputError
-from montecarlo.systems.params import ParamSystem
+from montecarlo.geometry.camera import Camera, direction_from_pixels, pixels_from_direction
 from montecarlo.geometry.rotations import euler_zxy_from_matrix, mounting_matrix
-from montecarlo.engine.system import Metric
+from montecarlo.io.ground_csv import GroundData
+from montecarlo.lsq import LeastSquaresFit
 
 FloatArray = NDArray[np.float64]
 
@@ -63,42 +60,44 @@ STANDARD_REFRACTION = 0.13
 MRAD = 1e-3
 MRAD_PER_H = 1e-3 / 3600.0
 
-BASE = dia.Effect("mounting", ("psi", "theta", "gamma"), ((-np.inf, np.inf),) * 3, (1e-6,) * 3,
+DEFAULT_MOUNTING = {"psi": math.radians(30.0), "theta": math.radians(20.0),
+                    "gamma": math.radians(10.0)}
+"""Seed 000's simulation mounting (section 1.4) [rad]."""
+
+BASE = Effect("mounting", ("psi", "theta", "gamma"), ((-np.inf, np.inf),) * 3, (1e-6,) * 3,
                   "mounting angles of seed 000, eq. (5) [rad]")
 
 _CANDIDATES = (
-    dia.Effect("radial_distortion", ("k1",), ((-0.5, 0.5),), (1e-6,),
+    Effect("radial_distortion", ("k1",), ((-0.5, 0.5),), (1e-6,),
                "tangent-plane radius r -> r (1 + k1 r^2) [1]"),
-    dia.Effect("tangential_distortion", ("p1", "p2"), ((-0.05, 0.05),) * 2, (1e-7,) * 2,
+    Effect("tangential_distortion", ("p1", "p2"), ((-0.05, 0.05),) * 2, (1e-7,) * 2,
                "Brown-Conrady decentering p1, p2 on tangent-plane coordinates [1]",
                (1.0, 1.0)),
-    dia.Effect("principal_point", ("c_x", "c_z"), ((-50.0, 50.0),) * 2, (1e-4,) * 2,
+    Effect("principal_point", ("c_x", "c_z"), ((-50.0, 50.0),) * 2, (1e-4,) * 2,
                "image coordinates + (c_x, c_z) [px]", (1.0, 1.0)),
-    dia.Effect("focal_scale", ("s",), ((-0.1, 0.1),), (1e-7,),
+    Effect("focal_scale", ("s",), ((-0.1, 0.1),), (1e-7,),
                "image coordinates x (1 + s) [1]"),
-    dia.Effect("aspect_ratio", ("a",), ((-0.05, 0.05),), (1e-7,),
+    Effect("aspect_ratio", ("a",), ((-0.05, 0.05),), (1e-7,),
                "px x (1 + a/2), pz x (1 - a/2) [1]"),
-    dia.Effect("detector_rotation", ("rho",), ((-0.1, 0.1),), (1e-6,),
+    Effect("detector_rotation", ("rho",), ((-0.1, 0.1),), (1e-6,),
                "image rotated by rho about its centre [rad]"),
-    dia.Effect("target_height_scale", ("s_h",), ((-0.05, 0.05),), (1e-7,),
+    Effect("target_height_scale", ("s_h",), ((-0.05, 0.05),), (1e-7,),
                "true height = surveyed height x (1 + s_h) [1]"),
-    dia.Effect("target_range_bias", ("b_y",), ((-5.0, 5.0),), (1e-5,),
+    Effect("target_range_bias", ("b_y",), ((-5.0, 5.0),), (1e-5,),
                "true y = surveyed y + b_y [m]"),
-    dia.Effect("target_lateral_bias", ("b_x",), ((-2.0, 2.0),), (1e-5,),
+    Effect("target_lateral_bias", ("b_x",), ((-2.0, 2.0),), (1e-5,),
                "true x = surveyed x + b_x [m]"),
-    dia.Effect("target_height_bias", ("b_z",), ((-2.0, 2.0),), (1e-5,),
+    Effect("target_height_bias", ("b_z",), ((-2.0, 2.0),), (1e-5,),
                "true z = surveyed z + b_z [m]"),
-    dia.Effect("lever_arm", ("l_x", "l_y", "l_z"), ((-1.0, 1.0),) * 3, (1e-5,) * 3,
+    Effect("lever_arm", ("l_x", "l_y", "l_z"), ((-1.0, 1.0),) * 3, (1e-5,) * 3,
                "projection centre at (l_x, l_y, l_z) in frame b [m]", (1.0, 1.0, 1.0)),
-    dia.Effect("refraction", ("k",), ((-5.0, 5.0),), (1e-2,),
+    Effect("refraction", ("k",), ((-5.0, 5.0),), (1e-2,),
                "apparent z + k d^2 / (2 R), standard k = 0.13 [1]"),
-    dia.Effect("earth_curvature", ("c",), ((0.0, 2.0),), (1e-2,),
+    Effect("earth_curvature", ("c",), ((0.0, 2.0),), (1e-2,),
                "apparent z - c d^2 / (2 R), physical c = 1 [1]"),
-    dia.Effect("drift", ("w_psi", "w_theta", "w_gamma"), ((-1e-5, 1e-5),) * 3, (1e-10,) * 3,
+    Effect("drift", ("w_psi", "w_theta", "w_gamma"), ((-1e-5, 1e-5),) * 3, (1e-10,) * 3,
                "mounting angles + w (t_s - mean t_s) [rad/s]", (1.0, 1.0, 1.0)),
 )
-CANDIDATE_NAMES = (*(c.name for c in _CANDIDATES), "session_shift")
-"""Ground candidate effects (``session_shift`` exists when the data have several sessions)."""
 
 SESSION_SHIFT_BOUND = 0.05
 """Physical bound of a session's shift of each mounting angle [rad]."""
@@ -124,62 +123,21 @@ def shift_unit(name: str) -> tuple[str, float]:
     return ("mrad", MRAD) if name in BASE.parameters else display_unit(name)
 
 
-# --------------------------------------------------------------------------- data
+def check_in_front(data: GroundData, camera: Camera, source: str) -> None:
+    """Refuse data whose targets lie behind the sensor for the best-fitting mounting.
 
-
-@dataclass(frozen=True)
-class GroundData:
-    """Observations of surveyed targets.
-
-    Attributes
-    ----------
-    targets : target names, one per observation.
-    positions : (n, 3) surveyed positions in frame b [m].
-    pixels : (n, 2) measured ``(px, pz)`` from the image centre [px] (eqs. 1, 4 signs).
-    t : (n,) observation times [s], or None.
-    session : session label of each observation, or None.
+    Raises
+    ------
+    InputError
+        Naming ``source``, the row (as a text editor counts, header = 1) and the columns.
     """
-
-    targets: tuple[str, ...]
-    positions: FloatArray
-    pixels: FloatArray
-    t: FloatArray | None = None
-    session: tuple[str, ...] | None = None
-
-    @property
-    def n(self) -> int:
-        return self.positions.shape[0]
-
-    def sessions(self) -> tuple[str, ...]:
-        """Session labels in order of first appearance (``("",)`` without sessions)."""
-        return tuple(dict.fromkeys(self.session)) if self.session else ("",)
-
-    def layout(self) -> dict[str, object]:
-        """Everything but the measured pixels, as JSON-able lists (for studies)."""
-        out: dict[str, object] = {"target": list(self.targets),
-                                  "x_m": self.positions[:, 0].tolist(),
-                                  "y_m": self.positions[:, 1].tolist(),
-                                  "z_m": self.positions[:, 2].tolist()}
-        if self.t is not None:
-            out["t_s"] = self.t.tolist()
-        if self.session is not None:
-            out["session"] = list(self.session)
-        return out
-
-
-def layout_from_json(text: str) -> GroundData:
-    """A :class:`GroundData` with zero pixels from :meth:`GroundData.layout` as JSON."""
-    raw = json.loads(text)
-    positions = np.column_stack([raw["x_m"], raw["y_m"], raw["z_m"]]).astype(float)
-    n = positions.shape[0]
-    return GroundData(tuple(raw.get("target", [f"T{i + 1}" for i in range(n)])), positions,
-                      np.zeros((n, 2)),
-                      None if raw.get("t_s") is None else np.asarray(raw["t_s"], float),
-                      None if raw.get("session") is None else tuple(map(str, raw["session"])))
-
-
-CSV_COLUMNS = ("target", "x_m", "y_m", "z_m", "px", "pz")
-"""Required columns of a ground data CSV; ``t_s`` and ``session`` are optional."""
+    start = initial_mounting(data, camera)
+    C = mounting_matrix(start["psi"], start["theta"], start["gamma"])
+    behind = np.flatnonzero((data.positions @ C.T)[:, 1] <= 0.0)
+    if behind.size:
+        raise InputError(f"{source}: row {int(behind[0]) + 2}, columns 'x_m', 'y_m', 'z_m': the "
+                         "target is behind the sensor for the mounting that best fits the "
+                         "measured directions (check the frame: x right, y forward, z up)")
 
 
 def min_targets() -> int:
@@ -187,82 +145,14 @@ def min_targets() -> int:
     return math.ceil((len(BASE.parameters) + 3 + 1) / 2)
 
 
-def read_ground_csv(path: str | Path, camera: Camera) -> GroundData:
-    """Read and check a ground data CSV (columns :data:`CSV_COLUMNS`, optional t_s, session).
-
-    Raises
-    ------
-    InputError
-        Missing column, non-numeric or NaN value, too few rows, or an image coordinate outside
-        the detector; one line naming file, row and column.
-    """
-    table = read_table(path, ["x_m", "y_m", "z_m", "px", "pz"], optional_numeric=["t_s"],
-                       text=["target"])
-    if len(table) < min_targets():
-        raise InputError(f"{path}: {len(table)} data rows, at least {min_targets()} needed (3 "
-                         "mounting angles + up to 3 parameters of an effect + 1 degree of "
-                         "freedom, 2 image coordinates per row)")
-    session = None
-    if "session" in table.columns:
-        values = table["session"].str.strip()
-        for i, v in enumerate(values):
-            if v == "":
-                raise InputError(f"{path}: row {i + 2}, column 'session': empty value")
-        session = tuple(values)
-    for column, half in (("px", camera.n_x / 2.0), ("pz", camera.n_z / 2.0)):
-        values = table[column].to_numpy(float)
-        bad = np.flatnonzero(np.abs(values) > half)
-        if bad.size:
-            i = int(bad[0])
-            raise InputError(f"{path}: row {i + 2}, column '{column}': {float(values[i])!r} "
-                             f"is outside the detector (|{column}| <= {half:g} px)")
-    positions = table[["x_m", "y_m", "z_m"]].to_numpy(float)
-    zero = np.flatnonzero(np.linalg.norm(positions, axis=1) == 0.0)
-    if zero.size:
-        raise InputError(f"{path}: row {int(zero[0]) + 2}, column 'x_m': target at the sensor "
-                         "origin (0, 0, 0) has no direction")
-    t = table["t_s"].to_numpy(float) if "t_s" in table.columns else None
-    data = GroundData(tuple(table["target"]), positions, table[["px", "pz"]].to_numpy(float), t,
-                      session)
-    start = initial_mounting(data, camera)
-    C = mounting_matrix(start["psi"], start["theta"], start["gamma"])
-    behind = np.flatnonzero((positions @ C.T)[:, 1] <= 0.0)
-    if behind.size:
-        raise InputError(f"{path}: row {int(behind[0]) + 2}, columns 'x_m', 'y_m', 'z_m': the "
-                         "target is behind the sensor for the mounting that best fits the "
-                         "measured directions (check the frame: x right, y forward, z up)")
-    return data
-
-
-def write_ground_csv(path: str | Path, data: GroundData) -> None:
-    """Write observations as a ground data CSV (temporary name, then rename)."""
-    from montecarlo.io.files import atomic_write_bytes
-
-    cols = ["target", "x_m", "y_m", "z_m", "px", "pz"]
-    if data.t is not None:
-        cols.append("t_s")
-    if data.session is not None:
-        cols.append("session")
-    lines = [",".join(cols)]
-    for i in range(data.n):
-        row = [data.targets[i], *(f"{v:.4f}" for v in data.positions[i]),
-               *(f"{v:.6f}" for v in data.pixels[i])]
-        if data.t is not None:
-            row.append(f"{data.t[i]:.1f}")
-        if data.session is not None:
-            row.append(data.session[i])
-        lines.append(",".join(row))
-    atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode())
-
-
 # --------------------------------------------------------------------------- forward model
 
 
-def candidates_for(data: GroundData) -> tuple[tuple[dia.Effect, ...], dict[str, str]]:
+def candidates_for(data: GroundData) -> tuple[tuple[Effect, ...], dict[str, str]]:
     """Candidate effects for these data and the ones unavailable (with the reason)."""
     sessions = data.sessions()
     names = tuple(f"{a}_shift_{s}" for s in sessions[1:] for a in ("psi", "theta", "gamma"))
-    shift = dia.Effect("session_shift", names,
+    shift = Effect("session_shift", names,
                        ((-SESSION_SHIFT_BOUND, SESSION_SHIFT_BOUND),) * len(names),
                        (1e-6,) * len(names),
                        "mounting angles shifted in each session after the first [rad]",
@@ -365,7 +255,7 @@ def pixel_covariance(data: GroundData, camera: Camera, mounting: Mapping[str, fl
 
 
 def ground_problem(data: GroundData, camera: Camera, pixel_sigma: float,
-                   survey_sigma: float = 0.0) -> dia.Problem:
+                   survey_sigma: float = 0.0) -> Problem:
     """The DIA problem of ground observations with stated pixel and survey noise.
 
     Residuals are whitened per target with the covariance of :func:`pixel_covariance` at the
@@ -382,7 +272,7 @@ def ground_problem(data: GroundData, camera: Camera, pixel_sigma: float,
         return white.reshape(*white.shape[:-2], -1)
 
     candidates, unavailable = candidates_for(data)
-    return dia.Problem("ground", BASE, candidates, residuals, start, unavailable)
+    return Problem("ground", BASE, candidates, residuals, start, unavailable)
 
 
 def raw_residuals(data: GroundData, camera: Camera, params: Mapping[str, float]) -> FloatArray:
@@ -445,107 +335,15 @@ def simulate(layout: GroundData, camera: Camera, truth: Mapping[str, float], pix
 
 
 def exact_problem(layout: GroundData, camera: Camera, truth: Mapping[str, float],
-                  pixel_sigma: float, survey_sigma: float) -> dia.Problem:
+                  pixel_sigma: float, survey_sigma: float) -> Problem:
     """The problem of noise-free data generated by ``truth`` (for design MDBs)."""
     exact = GroundData(layout.targets, layout.positions, predict_pixels(truth, layout, camera),
                        layout.t, layout.session)
     return ground_problem(exact, camera, pixel_sigma, survey_sigma)
 
 
-# --------------------------------------------------------------------------- study hook
-
-DEFAULT_MOUNTING = {"psi": math.radians(30.0), "theta": math.radians(20.0),
-                    "gamma": math.radians(10.0)}
-"""Seed 000's simulation mounting (section 1.4)."""
-
-_TRUTH_KEYS = tuple(p for c in _CANDIDATES for p in c.parameters)
-
-DEFAULT_PARAMS: dict[str, float | int | str] = {
-    "fov_yaw": math.radians(90.0), "fov_pitch": math.radians(90.0), "n_x": 512, "n_z": 512,
-    "pixel_sigma": 0.3, "survey_sigma": 0.01, "layout": "",
-    **DEFAULT_MOUNTING,
-    **dict.fromkeys(_TRUTH_KEYS, 0.0),
-    "c": 1.0, "k": STANDARD_REFRACTION,
-    "extra_truth": "",
-    "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": dia.ALPHA,
-}
-"""Defaults of :func:`run_trials` (SI units, radians); see its docstring."""
-
-METRICS = dia.TRIAL_METRICS
-"""Per-trial metrics of :func:`run_trials` (``named_watched``: refraction or earth_curvature
-named)."""
-
-
-def default_layout(camera: Camera, mounting: Mapping[str, float]) -> GroundData:
-    """The acceptance layout: 6 x 6 targets over 80 % of the field at 50 and 100 m, one hour."""
-    return field_layout(camera, mounting, (50.0, 100.0), (6, 6), 0.8, 3600.0, 1, rng=2024)
-
-
-def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
-               ) -> dict[str, FloatArray]:
-    """Monte Carlo of the ground diagnosis: simulate data sets, fit or diagnose each.
-
-    Parameters
-    ----------
-    params : mapping; missing keys take :data:`DEFAULT_PARAMS`.
-        ``fov_yaw``, ``fov_pitch`` [rad], ``n_x``, ``n_z`` [px]: camera (seed 000's 90 deg,
-        512 px). ``pixel_sigma`` [px] (0.3), ``survey_sigma`` [m] (0.01): noise.
-        ``layout`` [JSON text]: targets as :meth:`GroundData.layout`; "" for
-        :func:`default_layout` at the true mounting. ``psi``, ``theta``, ``gamma`` [rad]: true
-        mounting (30, 20, 10 deg). Every candidate parameter (``k1``, ``p1``, ``p2``, ``c_x``
-        [px], ``c_z`` [px], ``s``, ``a``, ``rho`` [rad], ``s_h``, ``b_x``, ``b_y``, ``b_z``,
-        ``l_x``, ``l_y``, ``l_z`` [m], ``k``, ``c``, ``w_psi``, ``w_theta``, ``w_gamma``
-        [rad/s]): its true value (0, except the physical ``c`` = 1 and ``k`` = 0.13).
-        ``extra_truth`` [JSON text]: further true parameters, e.g. session shifts [rad].
-        ``fit_effects`` [text]: comma-separated effects fitted for ``chi2`` .. ``rms`` ("":
-        the base model). ``diagnose`` [0/1]: also run the whole DIA diagnosis. ``expected``
-        [text]: the effect injected, for scoring. ``inject_mdb`` [1]: if > 0, ``expected`` is
-        injected at this multiple of its design MDB along its default direction (replacing its
-        values above). ``alpha`` [1]: significance (0.01).
-    rng : numpy Generator, the only source of randomness.
-    n : number of simulated data sets.
-
-    Returns
-    -------
-    dict of metric -> ndarray (n,), float64 (NaN where not applicable):
-        ``chi2``, ``chi2_red``, ``p_value`` [1], ``rms`` [px]: residual statistic of the
-        ``fit_effects`` model (rms over both coordinates of all observations).
-        With ``diagnose``: ``detected``, ``named_any`` [0/1]; ``n_named`` [count];
-        ``named_expected`` [0/1] (the expected effect named), ``named_expected_or_group``
-        [0/1] (named or in a named effect's confounded group); ``named_watched`` [0/1]
-        (refraction or earth_curvature named); ``expected_within_2sigma`` [1] (fraction of
-        its parameters within 2 sigma of the truth, when it is named);
-        ``expected_all_within_2sigma`` [0/1]; ``chi2_red_after`` [1] and
-        ``chi2_red_after_in_band`` [0/1] (inside the central 99 % band of chi2(dof)/dof).
-    """
-    unknown = set(params) - set(DEFAULT_PARAMS)
-    if unknown:
-        raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
-    p = {**DEFAULT_PARAMS, **params}
-    camera = Camera(float(p["fov_yaw"]), float(p["fov_pitch"]), float(p["n_x"]),
-                    float(p["n_z"]))
-    truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", *_TRUTH_KEYS)}
-    if p["extra_truth"]:
-        truth.update({k: float(v) for k, v in json.loads(str(p["extra_truth"])).items()})
-    layout = (default_layout(camera, truth) if not p["layout"]
-              else layout_from_json(str(p["layout"])))
-    sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
-    alpha = float(p["alpha"])
-    expected = str(p["expected"])
-    effects = tuple(e for e in str(p["fit_effects"]).split(",") if e.strip())
-    effects = tuple(e.strip() for e in effects)
-    if float(p["inject_mdb"]) > 0:
-        if not expected:
-            raise ValueError("inject_mdb needs an expected effect")
-        truth = dia.inject_at_mdb(
-            lambda tr: exact_problem(layout, camera, tr, sigma, survey), truth, expected,
-            float(p["inject_mdb"]), alpha)
-    return dia.score_trials(
-        lambda g: simulate(layout, camera, truth, sigma, survey, g),
-        lambda data: ground_problem(data, camera, sigma, survey),
-        lambda data, fit: float(np.sqrt(np.mean(raw_residuals(data, camera, fit.params) ** 2))),
-        truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
-        watched=("refraction", "earth_curvature"))
+TRUTH_KEYS = tuple(p for c in _CANDIDATES for p in c.parameters)
+"""Parameters of every candidate effect (session shifts aside)."""
 
 
 def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sigma: float
@@ -570,35 +368,16 @@ def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sig
     shifts = [q for c in candidates_for(data)[0] if c.name == "session_shift"
               for q in c.parameters]
 
-    def study_params(fit: dia.ModelFit) -> dict[str, object]:
+    def study_params(fit: LeastSquaresFit) -> dict[str, object]:
         values = fit.params
         return {"fov_yaw": float(camera.fov_yaw), "fov_pitch": float(camera.fov_pitch),
                 "n_x": int(camera.n_x), "n_z": int(camera.n_z), "pixel_sigma": pixel_sigma,
                 "survey_sigma": survey_sigma, "layout": layout,
                 **{k: float(values.get(k, 0.0)) for k in ("psi", "theta", "gamma",
-                                                          *_TRUTH_KEYS)},
+                                                          *TRUTH_KEYS)},
                 "extra_truth": json.dumps({q: values[q] for q in shifts if q in values}),
                 "fit_effects": ",".join(fit.effects[1:]), "diagnose": 0}
 
     return SystemView("ground", display_unit, "px", 1.0, ("px", "pz"),
-                      lambda params: raw_residuals(data, camera, params), axes, STUDY_SYSTEM,
-                      study_params, shift_unit)
-
-
-STUDY_SYSTEM = ParamSystem(
-    name="discrepancy_ground",
-    module="montecarlo.discrepancy.ground_effects",
-    units={"fov_yaw": "deg", "fov_pitch": "deg", "pixel_sigma": "px", "survey_sigma": "m",
-           "psi": "deg", "theta": "deg", "gamma": "deg", "c_x": "px", "c_z": "px",
-           "rho": "mrad", "b_x": "m", "b_y": "m", "b_z": "m", "l_x": "m", "l_y": "m",
-           "l_z": "m"},
-    metrics_=(
-        Metric("chi2", "χ² of the fitted model", "1", 1.0),
-        Metric("chi2_red", "reduced χ² of the fitted model", "1", 1.0),
-        Metric("p_value", "global test p-value", "1", 1.0),
-        Metric("rms", "residual RMS", "px", 1.0),
-        *(Metric(m, m.replace("_", " "), "1", 1.0) for m in METRICS[4:]),
-    ),
-    default_block_size=32,
-)
-"""Study system ``discrepancy_ground``: residual statistics and DIA rates (issue 5)."""
+                      lambda params: raw_residuals(data, camera, params), axes,
+                      "discrepancy_ground", study_params, shift_unit)

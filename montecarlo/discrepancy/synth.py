@@ -6,9 +6,10 @@ visiting order, one for the noise) and is written in the CSV format that
 JSON file; the diagnosis never reads it.
 
 Effects are given at the edge, in the units the reports use (``--effect NAME=V1[,V2...]``, one
-value per parameter of the effect, see ``montecarlo.ground_effects.DISPLAY_UNITS`` and
-``montecarlo.collimation_effects.DISPLAY_UNITS``), or as a multiple of the effect's minimal
-detectable bias for the data set's own design and noise (``--at-mdb NAME=MULT``).
+value per parameter of the effect, see ``DISPLAY_UNITS`` of
+:mod:`montecarlo.discrepancy.ground_effects` and :mod:`montecarlo.discrepancy.collimation_effects`),
+or as a multiple of the effect's minimal detectable bias for the data set's own design and noise
+(``--at-mdb NAME=MULT``).
 """
 
 from __future__ import annotations
@@ -16,20 +17,22 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from montecarlo.seed003 import model as col
 from montecarlo.discrepancy import collimation_effects as ce
-from montecarlo.discrepancy import engine as dia
 from montecarlo.discrepancy import ground_effects as ge
-from montecarlo.geometry.camera import Camera
+from montecarlo.discrepancy.design import inject_at_mdb
+from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.errors import InputError
+from montecarlo.geometry.camera import Camera
+from montecarlo.io.collimation_csv import MirrorData
+from montecarlo.io.ground_csv import GroundData
+from montecarlo.seed003.model import Noise
 
 
-def _effect_item(flag: str, item: str, effects: Mapping[str, dia.Effect]) -> tuple[str, str]:
+def _effect_item(flag: str, item: str, effects: Mapping[str, Effect]) -> tuple[str, str]:
     """Split ``NAME=TEXT`` from ``flag`` and check that NAME is one of ``effects``."""
     name, _, text = item.partition("=")
     name = name.strip()
@@ -38,7 +41,7 @@ def _effect_item(flag: str, item: str, effects: Mapping[str, dia.Effect]) -> tup
     return name, text
 
 
-def parse_effects(items: Sequence[str], effects: Mapping[str, dia.Effect],
+def parse_effects(items: Sequence[str], effects: Mapping[str, Effect],
                   display_unit: Callable[[str], tuple[str, float]]) -> dict[str, float]:
     """``NAME=V1[,V2...]`` (display units) -> parameter values in SI units.
 
@@ -63,7 +66,7 @@ def parse_effects(items: Sequence[str], effects: Mapping[str, dia.Effect],
     return out
 
 
-def parse_multiples(items: Sequence[str], effects: Mapping[str, dia.Effect]) -> dict[str, float]:
+def parse_multiples(items: Sequence[str], effects: Mapping[str, Effect]) -> dict[str, float]:
     """``NAME=MULT`` -> {effect: multiple of its MDB}."""
     out = {}
     for item in items:
@@ -77,11 +80,11 @@ def parse_multiples(items: Sequence[str], effects: Mapping[str, dia.Effect]) -> 
     return out
 
 
-def _inject(exact: Callable[[Mapping[str, float]], dia.Problem], truth: dict[str, float],
+def _inject(exact: Callable[[Mapping[str, float]], Problem], truth: dict[str, float],
             multiples: Mapping[str, float]) -> dict[str, float]:
     for name, k in multiples.items():
         try:
-            truth = dia.inject_at_mdb(exact, truth, name, k)
+            truth = inject_at_mdb(exact, truth, name, k)
         except ValueError as exc:
             raise InputError(f"--at-mdb {name}: {exc}") from None
     return truth
@@ -92,7 +95,7 @@ def synth_ground(*, seed: int, camera: Camera, pixel_sigma: float, survey_sigma:
                  grid: tuple[int, int], spread: float, duration: float, sessions: int,
                  effects: Mapping[str, float], at_mdb: Mapping[str, float],
                  atmosphere: bool = True, with_time: bool = True
-                 ) -> tuple[ge.GroundData, dict[str, float], int]:
+                 ) -> tuple[GroundData, dict[str, float], int]:
     """One ground data set: targets of :func:`montecarlo.ground_effects.field_layout`.
 
     ``atmosphere`` puts earth curvature and refraction at their physical values (c = 1,
@@ -106,7 +109,7 @@ def synth_ground(*, seed: int, camera: Camera, pixel_sigma: float, survey_sigma:
     layout = ge.field_layout(camera, mounting, ranges, grid, spread, duration, sessions,
                              layout_seed)
     if not with_time:
-        layout = ge.GroundData(layout.targets, layout.positions, layout.pixels, None,
+        layout = GroundData(layout.targets, layout.positions, layout.pixels, None,
                                layout.session)
     truth = {**mounting, **({"c": 1.0, "k": ge.STANDARD_REFRACTION} if atmosphere else {}),
              **effects}
@@ -116,16 +119,16 @@ def synth_ground(*, seed: int, camera: Camera, pixel_sigma: float, survey_sigma:
     visible = (np.abs(data.pixels[:, 0]) <= camera.n_x / 2) & \
         (np.abs(data.pixels[:, 1]) <= camera.n_z / 2)
     keep = np.flatnonzero(visible)
-    data = ge.GroundData(tuple(data.targets[i] for i in keep), data.positions[keep],
+    data = GroundData(tuple(data.targets[i] for i in keep), data.positions[keep],
                          data.pixels[keep], None if data.t is None else data.t[keep],
                          None if data.session is None else tuple(data.session[i] for i in keep))
     return data, truth, int(visible.size - keep.size)
 
 
 def synth_collimation(*, seed: int, n_azimuth: int, n_pitch: int, azimuth_span: float,
-                      pitch_span: float, frame_heading: float, noise: col.Noise,
+                      pitch_span: float, frame_heading: float, noise: Noise,
                       effects: Mapping[str, float], at_mdb: Mapping[str, float],
-                      with_roll: bool = False) -> tuple[ce.MirrorData, dict[str, float]]:
+                      with_roll: bool = False) -> tuple[MirrorData, dict[str, float]]:
     """One collimation data set on seed 003's fixture (:func:`paper_mirrors`).
 
     The MDB of ``--at-mdb`` is for the residual sigma ``hypot(theodolite, INS heading)`` the
@@ -133,7 +136,7 @@ def synth_collimation(*, seed: int, n_azimuth: int, n_pitch: int, azimuth_span: 
     """
     layout = ce.paper_mirrors(n_azimuth, n_pitch, azimuth_span, pitch_span)
     if with_roll:
-        layout = ce.MirrorData(layout.mirror, layout.sets, layout.theodolite_az,
+        layout = MirrorData(layout.mirror, layout.sets, layout.theodolite_az,
                                layout.theodolite_el, layout.ins_az, layout.ins_el,
                                np.zeros_like(layout.ins_az))
     sigma = math.hypot(noise.theodolite, noise.ins_heading)
@@ -141,13 +144,6 @@ def synth_collimation(*, seed: int, n_azimuth: int, n_pitch: int, azimuth_span: 
     truth = _inject(lambda tr: ce.exact_problem(layout, tr, sigma), truth, at_mdb)
     data = ce.simulate(layout, truth, noise, np.random.SeedSequence(seed).spawn(2)[1])
     return data, truth
-
-
-def write_collimation_csv(path: str | Path, data: ce.MirrorData) -> None:
-    """Write a collimation CSV (temporary name, then rename)."""
-    arrays = {"theodolite_az": data.theodolite_az, "theodolite_el": data.theodolite_el,
-              "ins_az": data.ins_az, "ins_el": data.ins_el, "ins_roll": data.roll}
-    col.write_readings(path, data.mirror, data.sets, arrays, with_roll=data.ins_roll is not None)
 
 
 def truth_report(system: str, seed: int, truth: Mapping[str, float],

@@ -32,8 +32,10 @@ if TYPE_CHECKING:  # pandas and scipy are imported only where summaries are made
 MANTISSA_BITS = 10
 MIN_EXP = -40
 MAX_EXP = 16
-_SHIFT = 52 - MANTISSA_BITS
-_BASE = int(np.float64(2.0**MIN_EXP).view(np.int64)) >> _SHIFT
+BIN_SHIFT = 52 - MANTISSA_BITS
+"""Right shift of a float's bits that leaves its exponent and leading mantissa bits."""
+BIN_BASE = int(np.float64(2.0**MIN_EXP).view(np.int64)) >> BIN_SHIFT
+"""Shifted bits of the smallest magnitude bin's lower edge."""
 N_MAG = (MAX_EXP - MIN_EXP) << MANTISSA_BITS
 """Magnitude bins per sign; the histogram has 2 * N_MAG + 3 bins (see :func:`bin_index`)."""
 N_BINS = 2 * N_MAG + 3
@@ -53,7 +55,7 @@ def bin_index(x: np.ndarray) -> np.ndarray:
     ZERO_BIN = |x| < 2**MIN_EXP, then positive magnitudes, and N_BINS - 1 = values >= 2**MAX_EXP.
     """
     a = np.abs(x)
-    k = (a.view(np.int64) >> _SHIFT) - _BASE
+    k = (a.view(np.int64) >> BIN_SHIFT) - BIN_BASE
     k = np.clip(k, -1, N_MAG)  # -1: below range (zero bin), N_MAG: overflow
     pos = ZERO_BIN + 1 + k
     neg = ZERO_BIN - 1 - k
@@ -63,7 +65,7 @@ def bin_index(x: np.ndarray) -> np.ndarray:
 
 def _magnitude_edges() -> np.ndarray:
     """Lower edges of the N_MAG magnitude bins and the upper edge of the last, [N_MAG + 1]."""
-    bits = (np.arange(N_MAG + 1, dtype=np.int64) + _BASE) << _SHIFT
+    bits = (np.arange(N_MAG + 1, dtype=np.int64) + BIN_BASE) << BIN_SHIFT
     return bits.view(np.float64)
 
 
@@ -242,16 +244,44 @@ class PointStats:
 
     def add_block(self, block: int, values: dict[tuple[str, str], np.ndarray],
                   invalid: dict[str, dict[str, int]]) -> None:
+        """Add one block of per-trial values (NaN = invalid) and its invalid counts."""
         for key, v in values.items():
             self.metrics.setdefault(key, MetricStats()).add_block(block, v)
-        self._add_invalid(invalid)
-        self.blocks.add(block)
+        self.add_block_summary(block, {}, invalid)
 
-    def _add_invalid(self, invalid: dict[str, dict[str, int]]) -> None:
+    def histogram_matrix(self, keys: list[tuple[str, str]], wanted: set[tuple[str, str]]
+                         ) -> np.ndarray:
+        """The histograms of ``keys`` as rows of one matrix, for a fused kernel to fill.
+
+        Created on first use; each wanted key's :class:`MetricStats` histogram is a view of its
+        row (rows of unwanted keys are filled by the kernel and ignored).
+        """
+        if self.hist_matrix is None:
+            self.hist_matrix = np.zeros((len(keys), N_BINS), np.int64)
+            for r, key in enumerate(keys):
+                if key in wanted:
+                    self.metrics[key] = MetricStats(hist=self.hist_matrix[r])
+        return self.hist_matrix
+
+    def add_block_summary(self, block: int,
+                          moments: dict[tuple[str, str], tuple[int, float, float, float, float]],
+                          invalid: dict[str, dict[str, int]]) -> None:
+        """Add one block already reduced by a fused kernel.
+
+        ``moments[key] = (count, mean, m2, minimum, maximum)`` of the key's valid values, whose
+        histogram the kernel has added to :meth:`histogram_matrix`; ``invalid[variant]`` maps
+        reason names (and ``"total"``) to counts.
+        """
+        for key, (count, mean, m2, lo, hi) in moments.items():
+            ms = self.metrics.setdefault(key, MetricStats())
+            ms.blocks[block] = (int(count), float(mean), float(m2)) if count else (0, 0.0, 0.0)
+            ms.minimum = min(ms.minimum, float(lo))
+            ms.maximum = max(ms.maximum, float(hi))
         for variant, counts in invalid.items():
             mine = self.invalid.setdefault(variant, {})
             for reason, c in counts.items():
                 mine[reason] = mine.get(reason, 0) + c
+        self.blocks.add(block)
 
     def merge(self, other: PointStats) -> None:
         for key, m in other.metrics.items():
@@ -259,7 +289,10 @@ class PointStats:
                 self.metrics[key].merge(m)
             else:
                 self.metrics[key] = m
-        self._add_invalid(other.invalid)
+        for variant, counts in other.invalid.items():
+            mine = self.invalid.setdefault(variant, {})
+            for reason, c in counts.items():
+                mine[reason] = mine.get(reason, 0) + c
         self.blocks |= other.blocks
 
     def summary(self, signed: dict[str, bool], confidence: float) -> pd.DataFrame:

@@ -32,10 +32,10 @@ from tqdm import tqdm
 
 from montecarlo import __version__
 from montecarlo.engine.aggregate import VALUE_COLUMNS, PointResult, PointStats
-from montecarlo.errors import InputError
-from montecarlo.io.files import atomic_write_bytes
 from montecarlo.engine.study import Study
 from montecarlo.engine.tasks import PointTask, run_task
+from montecarlo.errors import InputError
+from montecarlo.io.files import atomic_write_bytes
 
 Backend = Literal["loky", "dask"]
 

@@ -33,15 +33,16 @@ import hashlib
 import itertools
 import json
 import tomllib
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError, field_validator
+from pydantic import Field, ValidationError
 
-from montecarlo.errors import InputError
 from montecarlo.engine.schema import Strict
-from montecarlo.engine.system import SYSTEM_NAMES, Metric, System, get_system
+from montecarlo.engine.system import Metric, System
+from montecarlo.errors import InputError
 
 
 class StudyHeader(Strict):
@@ -56,13 +57,6 @@ class StudyHeader(Strict):
     common_random_numbers: bool = True
     per_trial: bool = False
     confidence: float = Field(default=0.95, gt=0.0, lt=1.0)
-
-    @field_validator("system")
-    @classmethod
-    def _known_system(cls, v: str) -> str:
-        if v not in SYSTEM_NAMES:
-            raise ValueError(f"unknown system; choose from {', '.join(SYSTEM_NAMES)}")
-        return v
 
 
 class Spec(Strict):
@@ -217,8 +211,12 @@ def _apply(path: Path, raw: dict[str, Any], key: str, value: Any) -> None:
     node[parts[-1]] = value
 
 
-def load_study(path: str | Path, *, trials: int | None = None, seed: int | None = None
-               ) -> Study:
+Systems = Mapping[str, Callable[[], System]]
+"""System name -> factory of the system (see :data:`montecarlo.systems.REGISTRY`)."""
+
+
+def load_study(path: str | Path, systems: Systems, *, trials: int | None = None,
+               seed: int | None = None) -> Study:
     """Read, validate and expand a study file; ``trials``/``seed`` override the file's."""
     path = Path(path)
     try:
@@ -227,12 +225,15 @@ def load_study(path: str | Path, *, trials: int | None = None, seed: int | None 
         raise InputError(f"{path}: no such study file") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
-    return study_from_dict(raw, path, trials=trials, seed=seed)
+    return study_from_dict(raw, systems, path, trials=trials, seed=seed)
 
 
-def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
+def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<study>", *,
                     trials: int | None = None, seed: int | None = None) -> Study:
-    """Validate and expand a study given as a dict (the parsed TOML); ``path`` labels errors."""
+    """Validate and expand a study given as a dict (the parsed TOML); ``path`` labels errors.
+
+    ``systems`` maps the names ``[study] system`` may take to their factories.
+    """
     path = Path(path)
     raw = copy.deepcopy(raw)
     header_raw = raw.pop("study", None)
@@ -248,7 +249,10 @@ def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
         header = StudyHeader.model_validate(header_raw)
     except ValidationError as err:
         raise InputError(_validation_message(path, err, ("study",))) from None
-    system = get_system(header.system)
+    if header.system not in systems:
+        raise InputError(f"{path}: study.system: unknown system; choose from "
+                         f"{', '.join(systems)} (got {header.system!r})")
+    system = systems[header.system]()
 
     spec = None
     if "spec" in raw:

@@ -1,13 +1,13 @@
-"""Registry of simulated systems a study can name in ``[study] system = ...``.
+"""What the study runner needs from a simulated system: its metrics and a block of trials.
 
 A system turns one validated grid-point configuration into per-trial metrics. The runner needs
 from it only what :class:`System` declares, so ground calibration, air calibration, collimation
-and stabilisation studies share one runner, one aggregation and one set of outputs.
+and stabilisation studies share one runner, one aggregation and one set of outputs. The systems
+themselves live in :mod:`montecarlo.systems`.
 """
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -60,21 +60,3 @@ class System(Protocol):
 
     def describe(self, prepared: Any) -> list[str]:
         """Lines stating the assumptions of this config, for reports."""
-
-
-_REGISTRY = {
-    "ground": "montecarlo.systems.ground:GroundSystem",
-    "air": "montecarlo.systems.params:AIR",
-    "collimation": "montecarlo.systems.params:COLLIMATION",
-    "stabilization": "montecarlo.systems.params:STABILIZATION",
-    "discrepancy_ground": "montecarlo.discrepancy.ground_effects:STUDY_SYSTEM",
-    "discrepancy_collimation": "montecarlo.discrepancy.collimation_effects:STUDY_SYSTEM",
-}
-SYSTEM_NAMES = tuple(_REGISTRY)
-
-
-def get_system(name: str) -> System:
-    """The registered system of that name (KeyError if none): a class is instantiated."""
-    module, attr = _REGISTRY[name].split(":")
-    obj = getattr(importlib.import_module(module), attr)
-    return obj() if isinstance(obj, type) else obj

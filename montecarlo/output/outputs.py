@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from montecarlo.engine.runner import RunOptions, StudyResult
 from montecarlo.io.files import with_umask
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import provenance
 from montecarlo.output.report import render_report
-from montecarlo.engine.runner import RunOptions, StudyResult
 
 
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions) -> Path:

@@ -8,8 +8,8 @@ from typing import Any
 
 import pandas as pd
 
-from montecarlo.output.plots import key_label, plot_metric
 from montecarlo.engine.runner import StudyResult
+from montecarlo.output.plots import key_label, plot_metric
 
 
 def markdown_table(frame: pd.DataFrame, floatfmt: str = ".4g") -> str:

@@ -47,10 +47,10 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-from montecarlo.seed000 import transfer_alignment as ta
 from montecarlo.errors import InputError
 from montecarlo.geometry.metrics import AXIS_METRICS, ROTATION_METRICS, all_metrics, error_matrix
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed000 import transfer_alignment as ta
 
 FloatArray = NDArray[np.float64]
 

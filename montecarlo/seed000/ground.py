@@ -23,7 +23,11 @@ from numpy.typing import ArrayLike, NDArray
 from montecarlo.geometry import camera as cam
 from montecarlo.geometry.invalid import FLAG_DTYPE, Invalid, mark
 from montecarlo.geometry.metrics import all_metrics, error_matrix
-from montecarlo.geometry.rotations import mounting_angles_from_columns, mounting_matrix, target_frame_matrix
+from montecarlo.geometry.rotations import (
+    mounting_angles_from_columns,
+    mounting_matrix,
+    target_frame_matrix,
+)
 
 FloatArray = NDArray[np.float64]
 FlagArray = NDArray[np.uint16]

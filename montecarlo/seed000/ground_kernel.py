@@ -1,9 +1,9 @@
 """Fast fused kernel of the ground calibration: placement -> pixels -> both solves -> D.
 
-Same mathematics as the literal reference (:mod:`montecarlo.ground`, seed 000 eqs. 4-18) in
-another algebra, tested equal to it to 1e-12:
+Same mathematics as the literal reference (:mod:`montecarlo.seed000.ground`, seed 000 eqs. 4-18)
+in another algebra, tested equal to it to 1e-12:
 
-* pixels from the tangent-plane form ``k u_x / u_y`` (no equivalent angles, NOTES.md);
+* pixels from the tangent-plane form ``k u_x / u_y`` (no equivalent angles; docs/conventions.md);
 * directions from pixels as ``[f_x / k_x, 1, f_z / k_z]`` normalised (eqs. 1-3 combined);
 * eq. (14) without inverse trigonometry: ``sin(theta) = C23``, ``cos(theta) = sqrt(1 - C23^2)``,
   ``(sin, cos)(gamma) = (-C13, C33) / hypot(C13, C33)``, ``sin(psi) = (C12 C33 - C13 C32) /
@@ -13,7 +13,7 @@ another algebra, tested equal to it to 1e-12:
 
 The arithmetic and the invalid-geometry flags run in one numba loop; the inverse trigonometric
 functions of the metrics run as numpy's SIMD ufuncs (numba's are scalar here). Aggregation into
-the streaming statistics of :mod:`montecarlo.aggregate` is a second numba loop.
+the streaming statistics is :mod:`montecarlo.engine.accumulate`, a second numba loop.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ import threading
 import numba as nb
 import numpy as np
 
-from montecarlo.engine import aggregate as agg
 from montecarlo.geometry.invalid import Invalid
 
 _BEHIND = int(Invalid.BEHIND_SENSOR)
@@ -49,11 +48,6 @@ VALUE_ROWS = (
 :func:`metrics_in_place`; the rows themselves are METRIC_ROWS of the fields."""
 METRIC_ROWS = np.array([0, 1, 2, 3, 4, 5, 12, 13, 14, 15, 16, 17])
 """Rows of the fields that hold the metrics after :func:`metrics_in_place`."""
-
-_SHIFT = agg._SHIFT
-_BASE = agg._BASE
-_ZERO = agg.ZERO_BIN
-_N_MAG = agg.N_MAG
 
 SUB_CHUNK = 8192
 """Trials processed at a time inside a block (keeps the working set in cache)."""
@@ -115,7 +109,7 @@ def _solution(m12, m32, m13, m23, m33, pre, c00, c01, c02, c10, c11, c12, c20, c
     trace = d00 + d11 + d22
     ok = flag == 0
     nan = np.nan
-    # the arguments of the metrics of montecarlo.metrics, clipped as there
+    # the arguments of the metrics of montecarlo.geometry.metrics, clipped as there
     return (flag,
             np.sqrt(w0 * w0 + w1 * w1 + w2 * w2) if ok else nan,
             trace - 1.0 if ok else nan,
@@ -277,100 +271,16 @@ def output_rows(out: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def metrics_in_place(fields: np.ndarray) -> None:
-    """The metrics of :mod:`montecarlo.metrics` from the kernel's fields, in place [rad].
+    """The metrics of :mod:`montecarlo.geometry.metrics` from the kernel's fields, in place [rad].
 
     ``fields``: (2 * N_FIELDS, n); afterwards its METRIC_ROWS hold the metrics of VALUE_ROWS.
     The reference's formulas, evaluated by numpy's SIMD ufuncs over stacked rows; arctan2 of
     the full rather than the halved arguments of ``metrics.rotation_angle`` gives the same
     result, since halving is exact. Eq. (18) as printed, ``arccos(sqrt(1 + tr D)/2)``, is
-    exactly half the rotation angle (NOTES.md) and is taken as that: evaluating the arccos form
-    would only add its own round-off (see ``metrics.eq18_angle``).
+    exactly half the rotation angle (docs/conventions.md) and is taken as that: evaluating the
+    arccos form would only add its own round-off (see ``metrics.eq18_angle``).
     """
     np.arctan2(fields[0:6], fields[6:12], out=fields[0:6])
     np.arccos(fields[12:14], out=fields[12:14])
     np.arcsin(fields[14:16], out=fields[14:16])
     np.multiply(fields[0:4:3], 0.5, out=fields[16:18])
-
-
-_EXPONENT = 0x7FF0000000000000
-_MAGNITUDE = 0x7FFFFFFFFFFFFFFF
-_INT_MAX = np.iinfo(np.int64).max
-_INT_MIN = np.iinfo(np.int64).min
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def accumulate(values, rows, hist, stats, bins):  # pragma: no cover - compiled
-    """Add per-trial metric values to streaming statistics (NaN = invalid, skipped).
-
-    values : (k, n) float64, of which ``rows`` (m,) are the metrics, in this order;
-    hist : (m, N_BINS) int64, in place; stats : (m, 5) float64 in
-    place: count, mean, m2, min, max (sub-chunks merged by Chan's formula in a fixed order);
-    bins : (n,) int32 scratch for the bin indices (as :func:`montecarlo.aggregate.bin_index`).
-
-    Written for the loop vectoriser: validity is tested on the exponent bits and min/max are
-    taken on order-preserving integer keys of the bits with integer min/max (a float min/max
-    that skips NaNs is not a reduction LLVM can vectorise). The sums are reassociated
-    (vectorised): deterministic on one CPU type, and may differ in the last bits between CPU
-    types, as numpy's own SIMD dispatch does.
-    """
-    m = rows.shape[0]
-    n = values.shape[1]
-    bits = values.view(np.int64)
-    for r in range(m):
-        row = values[rows[r]]
-        brow = bits[rows[r]]
-        shift = 0.0  # a value near the data, for a one-pass sum of squared deviations
-        for i in range(n):
-            if row[i] == row[i]:
-                shift = row[i]
-                break
-        cnt = 0
-        s1 = 0.0
-        s2 = 0.0
-        kmin = _INT_MAX
-        kmax = _INT_MIN
-        for i in range(n):
-            b = brow[i]
-            valid = (b & _EXPONENT) != _EXPONENT  # finite
-            d = row[i] - shift if valid else 0.0
-            cnt += 1 if valid else 0
-            s1 += d
-            s2 += d * d
-            key = b if b >= 0 else b ^ _MAGNITUDE  # integer order = float order
-            kmin = min(kmin, key if valid else _INT_MAX)
-            kmax = max(kmax, key if valid else _INT_MIN)
-            k = ((b & _MAGNITUDE) >> _SHIFT) - _BASE
-            kk = min(k, _N_MAG)
-            idx = _ZERO if k < 0 else (_ZERO - 1 - kk if b < 0 else _ZERO + 1 + kk)
-            bins[i] = idx if valid else -1
-        hrow = hist[r]
-        for i in range(n):
-            if bins[i] >= 0:
-                hrow[bins[i]] += 1
-        if cnt == 0:
-            continue
-        lo = np.array([kmin if kmin >= 0 else kmin ^ _MAGNITUDE]).view(np.float64)[0]
-        hi = np.array([kmax if kmax >= 0 else kmax ^ _MAGNITUDE]).view(np.float64)[0]
-        mean = shift + s1 / cnt
-        m2 = max(s2 - s1 * s1 / cnt, 0.0)
-        n0 = stats[r, 0]
-        if n0 == 0.0:
-            stats[r, 1] = mean
-            stats[r, 2] = m2
-            stats[r, 0] = cnt
-        else:
-            tot = n0 + cnt
-            delta = mean - stats[r, 1]
-            stats[r, 1] += delta * cnt / tot
-            stats[r, 2] += m2 + delta * delta * n0 * cnt / tot
-            stats[r, 0] = tot
-        stats[r, 3] = min(stats[r, 3], lo)
-        stats[r, 4] = max(stats[r, 4], hi)
-
-
-def new_stats(m: int) -> np.ndarray:
-    """Empty accumulator rows for :func:`accumulate`."""
-    s = np.zeros((m, 5))
-    s[:, 3] = np.inf
-    s[:, 4] = -np.inf
-    return s

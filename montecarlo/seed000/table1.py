@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from montecarlo.seed000 import ground
 from montecarlo.geometry.camera import Camera
+from montecarlo.seed000 import ground
 
 PAPER_CAMERA = Camera.from_degrees(90.0, 90.0, 512, 512)
 """Seed 000, section 1.4: 90 x 90 deg field of view, 512 x 512 pixels."""

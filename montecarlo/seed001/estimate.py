@@ -7,14 +7,14 @@ the first step the regressor, recursive least squares (RLS) the estimator. Here:
   image noise is white on the position, differencing it would correlate it;
 * the residual is always computed with the exact kinematics (:func:`predict_los`);
 * the first RLS pass uses the first-order rows about zero,
-  :func:`montecarlo.stabilization.drift_matrix` (the derived eq. (6) integrated over time, image
-  roll included): alone, that is the patent's linear estimate, whose error is of the order of
+  :func:`montecarlo.seed001.linear_model.drift_matrix` (the derived eq. (6) integrated over time,
+  image roll included): alone, that is the patent's linear estimate, whose error is of the order of
   the angles squared. Further passes use the exact Jacobian (:func:`los_jacobian`) about the
   current estimate until the estimate no longer moves (Gauss-Newton in RLS form);
 * the state carries, beside the parameters, the target's image offset as a random walk: its
   initial value is the unknown aim point, its increments the LOS walk that white gyro noise
   drives through the loop (isotropic, density = the gyro noise density; see
-  :func:`montecarlo.stabilization.bias_rate_matrix`). Without gyro noise this is plain RLS.
+  :func:`montecarlo.seed001.linear_model.bias_rate_matrix`). Without gyro noise this is plain RLS.
 
 Parameters (``PARAMETER_NAMES``): the four observable combinations
 ``[delta_px, delta_gx, delta_gy, delta_z]`` (``delta_z = dpz - dgz``), the camera roll about the
@@ -28,7 +28,6 @@ seed 001: patent CN102288133B, claim 1, third and fourth steps; eqs. (1)-(6).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,9 +35,11 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
-from montecarlo.seed001 import kinematics as stab
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed001.kinematics import camera_matrix
+from montecarlo.seed001.linear_model import drift_matrix, image_roll_rate, plane_rotation
+from montecarlo.seed001.simulate import Compensation, Record, Setup
 
 FloatArray = NDArray[np.float64]
 
@@ -128,7 +129,7 @@ def predict_los(
                         (np.asarray(gyro, float) - p[..., None, 5:8])[..., None])[..., 0]
     R = carrier_attitude(t, omega_b)
     delta_p = np.stack([p[..., 0], p[..., 4], p[..., 3]], axis=-1)
-    C_bc = stab.camera_matrix(eta, eps, delta_p[..., None, :])  # seed 001, eq. (2)
+    C_bc = camera_matrix(eta, eps, delta_p[..., None, :])  # seed 001, eq. (2)
     target = C_bc[..., 0, 1, :]
     target_k = np.matmul(np.swapaxes(R, -1, -2), target[..., None, :, None])
     u = np.matmul(C_bc, target_k)[..., 0]
@@ -270,9 +271,9 @@ class Estimate:
         """``[delta_px, delta_gx, delta_gy, delta_z]``, shape (..., 4) [rad]."""
         return self.values[..., :4]
 
-    def compensation(self) -> stab.Compensation:
+    def compensation(self) -> Compensation:
         """The corrections a stabilisation loop applies (claim 1, fourth step)."""
-        return stab.Compensation(angles=self.values[..., :4], gyro_bias=self.values[..., 5:8])
+        return Compensation(angles=self.values[..., :4], gyro_bias=self.values[..., 5:8])
 
 
 def estimate(
@@ -306,7 +307,7 @@ def estimate(
     forgetting : float in (0, 1]
     max_passes : int
         RLS passes. The first uses the first-order rows about zero
-        (:func:`montecarlo.stabilization.drift_matrix`; alone, it is the patent's linear
+        (:func:`montecarlo.seed001.linear_model.drift_matrix`; alone, it is the patent's linear
         estimate), the next ones the exact Jacobian at the current estimate
         (:func:`los_jacobian`).
     tol : float
@@ -321,17 +322,17 @@ def estimate(
     batch = np.broadcast_shapes(gyro.shape[:-2], eta.shape[:-1], eps.shape[:-1],
                                 los_px.shape[:-2])
     n_par = len(PARAMETER_NAMES)
-    rows7 = stab.drift_matrix(t, gyro, eta, eps, camera)  # first-order model about zero
+    rows7 = drift_matrix(t, gyro, eta, eps, camera)  # first-order model about zero
     first_rows = np.concatenate([rows7[..., :ROLL], np.zeros((*rows7.shape[:-1], 1)),
                                  rows7[..., ROLL:]], axis=-1)
     k_x, k_z = float(camera.k_x), float(camera.k_z)
 
     # random walk of the image offset: turned with the image roll, driven by gyro noise
     scale = np.diag([k_x, k_z])
-    roll_rate = stab.image_roll_rate(gyro, eta, eps)
+    roll_rate = image_roll_rate(gyro, eta, eps)
     turn = np.concatenate([np.zeros((*roll_rate.shape[:-1], 1)),
                            0.5 * (roll_rate[..., 1:] + roll_rate[..., :-1]) * np.diff(t)], -1)
-    walk_transition = scale @ stab.plane_rotation(turn) @ np.linalg.inv(scale)
+    walk_transition = scale @ plane_rotation(turn) @ np.linalg.inv(scale)
     walk_var = None
     if gyro_noise > 0.0:
         dt = np.diff(t, prepend=t[0])[:, None]
@@ -367,134 +368,7 @@ def estimate(
                     residual_rms=rms)
 
 
-def estimate_record(record: stab.Record, setup: stab.Setup, **kwargs) -> Estimate:
+def estimate_record(record: Record, setup: Setup, **kwargs) -> Estimate:
     """:func:`estimate` on a simulated record with the setup's camera and noise levels."""
     return estimate(record.t, record.gyro, record.eta, record.eps, record.los_px, setup.camera,
                     setup.image_noise, setup.gyro_noise, **kwargs)
-
-
-# --------------------------------------------------------------------------------------------
-# Monte Carlo hook for the study runner
-# --------------------------------------------------------------------------------------------
-
-DEFAULT_PARAMS: dict[str, float] = {
-    "duration": 60.0,
-    "rate": 100.0,
-    "misalignment_min": np.radians(0.2),
-    "misalignment_max": np.radians(1.0),
-    "rock_amplitude": np.radians(5.0),
-    "rock_freq_yaw": 0.25,
-    "rock_freq_pitch": 0.4,
-    "rock_freq_roll": 0.32,
-    "aim_azimuth": np.radians(20.0),
-    "aim_pitch": np.radians(10.0),
-    "image_noise": 0.1,
-    "gyro_noise": np.radians(0.01) / 60.0,
-    "gyro_bias": np.radians(1.0) / 3600.0,
-    "fov": np.radians(5.0),
-    "pixels": 1024.0,
-    "forgetting": 1.0,
-    "max_passes": 10.0,
-}
-"""Defaults of :func:`run_trials` (SI units, radians); see its docstring."""
-
-
-TRIAL_CHUNK = 32
-"""Trials simulated and estimated together; bounds the memory (about 360 MB peak for the whole
-process at 60 s and 100 Hz)."""
-
-
-def run_trials(
-    params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
-) -> dict[str, FloatArray]:
-    """Simulate, estimate and compensate ``n`` independent calibration runs.
-
-    Each trial draws the six installation angles (``dgx, dgy, dgz, dpx, dpy, dpz``) with
-    magnitudes uniform in ``[misalignment_min, misalignment_max]`` and random signs, a gyro
-    bias per axis ~ N(0, gyro_bias), the three rocking phases uniform in [0, 2 pi), and gyro
-    and image noise; it simulates the run, estimates, then reruns the same rocking with fresh
-    noise and the estimate compensated.
-
-    Parameters
-    ----------
-    params : mapping
-        Keys (unit, default; missing keys take ``DEFAULT_PARAMS``):
-
-        ``duration`` [s] 60; ``rate`` [Hz] 100 (gyro, loop and frame rate);
-        ``misalignment_min``, ``misalignment_max`` [rad] 0.2 deg, 1 deg;
-        ``rock_amplitude`` [rad] 5 deg (each of yaw, pitch, roll);
-        ``rock_freq_yaw``, ``rock_freq_pitch``, ``rock_freq_roll`` [Hz] 0.25, 0.4, 0.32;
-        ``aim_azimuth``, ``aim_pitch`` [rad] 20 deg, 10 deg (gimbal angles at the start);
-        ``image_noise`` [px] 0.1; ``gyro_noise`` [rad/s/sqrt(Hz)] 2.9e-6 (0.01 deg/sqrt(h));
-        ``gyro_bias`` [rad/s] 4.8e-6 (1 deg/h, 1 sigma per axis);
-        ``fov`` [rad] 5 deg and ``pixels`` 1024 (square camera);
-        ``forgetting`` 1.0; ``max_passes`` 10 (1: the linear estimate about zero).
-    rng : numpy.random.Generator
-        The only source of randomness.
-    n : int
-        Number of trials.
-
-    Returns
-    -------
-    dict of ndarray, shape (n,)
-        For ``q`` in ``dpx, dgx, dgy, dz`` (the observable combinations, ``dz = dpz - dgz``)
-        and ``dpy``: ``{q}_true`` [rad], ``{q}_error`` (estimate - truth) [rad],
-        ``{q}_sigma`` [rad], ``{q}_rel_error`` (|error| / |truth|); ``within_2sigma``,
-        ``within_5pct``, ``accepted`` (1.0 if all four combinations pass the test, both for
-        ``accepted``, else 0.0); ``los_rms_before``, ``los_rms_after`` [rad] (RMS of the true
-        LOS error of the calibration run and of the compensated rerun), ``los_rms_ratio``
-        (after / before); ``residual_rms`` [px]; ``passes`` (RLS passes of the trial's chunk
-        of ``TRIAL_CHUNK`` trials). NaN marks a trial whose estimate did not converge.
-    """
-    unknown = set(params) - set(DEFAULT_PARAMS)
-    if unknown:
-        raise KeyError(f"unknown stabilization parameters: {', '.join(sorted(unknown))}")
-    p = {**DEFAULT_PARAMS, **{k: float(v) for k, v in params.items()}}
-    camera = Camera(p["fov"], p["fov"], p["pixels"], p["pixels"])
-    setup = stab.Setup(duration=p["duration"], rate=p["rate"], aim_azimuth=p["aim_azimuth"],
-                       aim_pitch=p["aim_pitch"], camera=camera, image_noise=p["image_noise"],
-                       gyro_noise=p["gyro_noise"])
-    size = rng.uniform(p["misalignment_min"], p["misalignment_max"], (n, 6))
-    angles = size * rng.choice([-1.0, 1.0], (n, 6))
-    delta_g, delta_p = angles[:, :3], angles[:, 3:]
-    bias = p["gyro_bias"] * rng.standard_normal((n, 3))
-    phase = rng.uniform(0.0, 2.0 * np.pi, (n, 3))
-    frequency = [p["rock_freq_yaw"], p["rock_freq_pitch"], p["rock_freq_roll"]]
-    sim_rng, rerun_rng = rng.spawn(2)
-
-    chunks = []
-    for lo in range(0, n, TRIAL_CHUNK):
-        part = slice(lo, min(lo + TRIAL_CHUNK, n))
-        rocking = stab.Rocking(np.full(3, p["rock_amplitude"]), frequency, phase[part])
-        run = stab.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part], sim_rng)
-        est = estimate_record(run, setup, forgetting=p["forgetting"],
-                              max_passes=int(p["max_passes"]))
-        rerun = stab.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part],
-                              rerun_rng, compensation=est.compensation())
-        chunks.append((est, run.los_error, rerun.los_error))
-
-    values = np.concatenate([c[0].values for c in chunks])[:, [0, 1, 2, 3, ROLL]]
-    sigma = np.concatenate([c[0].sigma for c in chunks])[:, [0, 1, 2, 3, ROLL]]
-    bad = ~np.concatenate([c[0].converged for c in chunks])
-    truth = np.stack([delta_p[:, 0], delta_g[:, 0], delta_g[:, 1],
-                      delta_p[:, 2] - delta_g[:, 2], delta_p[:, 1]], axis=-1)
-    error = values - truth
-    out: dict[str, FloatArray] = {}
-    for j, name in enumerate(("dpx", "dgx", "dgy", "dz", "dpy")):
-        out[f"{name}_true"] = truth[:, j]
-        out[f"{name}_error"] = error[:, j]
-        out[f"{name}_sigma"] = sigma[:, j]
-        out[f"{name}_rel_error"] = np.abs(error[:, j]) / np.abs(truth[:, j])
-    in_2s = np.all(np.abs(error[:, :4]) <= 2.0 * sigma[:, :4], axis=-1)
-    in_5p = np.all(np.abs(error[:, :4]) <= 0.05 * np.abs(truth[:, :4]), axis=-1)
-    out["within_2sigma"] = in_2s.astype(float)
-    out["within_5pct"] = in_5p.astype(float)
-    out["accepted"] = (in_2s & in_5p).astype(float)
-    out["los_rms_before"] = np.concatenate([np.sqrt(np.mean(c[1] ** 2, axis=-1)) for c in chunks])
-    out["los_rms_after"] = np.concatenate([np.sqrt(np.mean(c[2] ** 2, axis=-1)) for c in chunks])
-    out["los_rms_ratio"] = out["los_rms_after"] / out["los_rms_before"]
-    out["residual_rms"] = np.concatenate([c[0].residual_rms for c in chunks])
-    out["passes"] = np.concatenate([np.full(c[1].shape[0], float(c[0].passes)) for c in chunks])
-    for key, value in out.items():
-        out[key] = np.where(bad, np.nan, value).astype(np.float64)
-    return out

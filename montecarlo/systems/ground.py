@@ -26,17 +26,16 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from montecarlo.engine import aggregate as agg
-from montecarlo.seed000 import ground
 from montecarlo.engine.aggregate import PointStats
-from montecarlo.geometry.camera import Camera
 from montecarlo.engine.distributions import Distribution, Streams, corner_signs, fill_pair
-from montecarlo.seed000.ground import SOLVERS
+from montecarlo.engine.schema import Source, Strict, to_distribution
+from montecarlo.engine.system import BlockInvalid, BlockValues, Metric
+from montecarlo.geometry.camera import Camera
 from montecarlo.geometry.invalid import reason_counts
 from montecarlo.geometry.metrics import AXIS_METRICS, ROTATION_METRICS
 from montecarlo.geometry.rotations import mounting_matrix
-from montecarlo.engine.schema import Source, Strict, to_distribution
-from montecarlo.engine.system import BlockInvalid, BlockValues, Metric
+from montecarlo.seed000 import ground
+from montecarlo.seed000.ground import SOLVERS
 
 PLACEMENT_SOURCES = ("dx_m", "dy_m", "dh1_m", "dh_m")
 MOUNTING_SOURCES = ("psi_deg", "theta_deg", "gamma_deg")
@@ -291,17 +290,14 @@ class GroundSystem:
     def accumulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
                          n: int, block: int, stats: PointStats) -> None:
         """The same trials through the fused kernel, aggregated straight into ``stats``."""
-        from montecarlo.seed000 import ground_kernel as gk  # numba: loaded only where kernels run
+        from montecarlo.engine import accumulate  # numba: loaded only where kernels run
+        from montecarlo.seed000 import ground_kernel as gk
 
         p = prepared
         keys = [(SOLVERS[v], m) for v, m in gk.VALUE_ROWS]  # both variants are computed
-        if stats.hist_matrix is None:
-            stats.hist_matrix = np.zeros((len(keys), agg.N_BINS), np.int64)
-            for r, key in enumerate(keys):
-                if key[0] in p.variants:
-                    stats.metrics[key] = agg.MetricStats(hist=stats.hist_matrix[r])
+        hist = stats.histogram_matrix(keys, {k for k in keys if k[0] in p.variants})
         cam = p.camera
-        acc = gk.new_stats(len(keys))
+        acc = accumulate.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
         for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
             m = min(gk.SUB_CHUNK, n - s)
@@ -317,19 +313,11 @@ class GroundSystem:
             for i in range(2):
                 if flags[i].any():
                     flag_counts[i] += np.bincount(flags[i], minlength=256)
-            gk.accumulate(fields, gk.METRIC_ROWS, stats.hist_matrix, acc, bins)
-        for r, key in enumerate(keys):
-            if key not in stats.metrics:
-                continue  # a variant the study does not ask for
-            count, mean, m2, lo, hi = acc[r]
-            ms = stats.metrics[key]
-            ms.blocks[block] = (int(count), float(mean), float(m2)) if count else (0, 0.0, 0.0)
-            ms.minimum = min(ms.minimum, float(lo))
-            ms.maximum = max(ms.maximum, float(hi))
-        for i, v in enumerate(SOLVERS):
-            if v in p.variants:
-                stats._add_invalid({v: reason_counts(flag_counts[i])})
-        stats.blocks.add(block)
+            accumulate.accumulate(fields, gk.METRIC_ROWS, hist, acc, bins)
+        moments = {key: tuple(acc[r]) for r, key in enumerate(keys) if key[0] in p.variants}
+        invalid = {v: reason_counts(flag_counts[i]) for i, v in enumerate(SOLVERS)
+                   if v in p.variants}
+        stats.add_block_summary(block, moments, invalid)
 
     def describe(self, prepared: PreparedGround) -> list[str]:
         p = prepared

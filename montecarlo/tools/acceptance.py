@@ -1,4 +1,4 @@
-"""Acceptance of the discrepancy workflow (issue 5), run through the study runner.
+"""Acceptance of the discrepancy workflow, run through the study runner.
 
 For each system, one study whose grid points are scenarios on a realistic layout:
 
@@ -11,7 +11,7 @@ For each system, one study whose grid points are scenarios on a realistic layout
   1.5 MDB on top of them.
 
 Per scenario: how often something (the right thing) is named, the parameter coverage, and
-chi2_red after adaptation inside its 99 % band. ``python -m montecarlo.discrepancy_acceptance``
+chi2_red after adaptation inside its 99 % band. ``python -m montecarlo.tools.acceptance``
 prints the table (markdown).
 """
 
@@ -27,13 +27,18 @@ import numpy as np
 import pandas as pd
 
 from montecarlo.discrepancy import collimation_effects as ce
-from montecarlo.discrepancy import engine as dia
 from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy.design import inject_at_mdb
+from montecarlo.discrepancy.engine import analyse_candidates
+from montecarlo.discrepancy.fit import fit_model
+from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.geometry.camera import Camera
-from montecarlo.discrepancy.view import study_params_si
+from montecarlo.systems import discrepancy as sd
+from montecarlo.systems import study_from_dict
+from montecarlo.systems.params import study_params
 
 MULTIPLE = 1.5
-"""Injections are at this multiple of the MDB (issue 5)."""
+"""Injections are at this multiple of the MDB."""
 PAPER_AXIS = math.radians(0.05)
 """Axis offsets of the collimation ``paper`` scenarios [rad] (seed 003: 0.02-0.1 deg)."""
 
@@ -41,17 +46,18 @@ PAPER_AXIS = math.radians(0.05)
 def testable_effects(system: str, model: tuple[str, ...] = ()) -> list[str]:
     """Candidates with status ``testable`` against base + ``model`` in the default design."""
     if system == "ground":
-        p = ge.DEFAULT_PARAMS
+        p = sd.GROUND_DEFAULTS
         camera = Camera(p["fov_yaw"], p["fov_pitch"], p["n_x"], p["n_z"])
         truth = {k: float(p[k]) for k in ("psi", "theta", "gamma")}
-        problem = ge.exact_problem(ge.default_layout(camera, truth), camera, truth,
+        problem = ge.exact_problem(sd.default_layout(camera, truth), camera, truth,
                                    float(p["pixel_sigma"]), float(p["survey_sigma"]))
     else:
-        sigma = math.hypot(ce.DEFAULT_PARAMS["theodolite_sigma"], ce.DEFAULT_PARAMS["ins_sigma"])
-        truth = {"frame_heading": float(ce.DEFAULT_PARAMS["frame_heading"])}
+        p = sd.COLLIMATION_DEFAULTS
+        sigma = math.hypot(p["theodolite_sigma"], p["ins_sigma"])
+        truth = {"frame_heading": float(p["frame_heading"])}
         problem = ce.exact_problem(ce.paper_mirrors(), truth, sigma)
-    fit = dia.fit_model(problem, model)
-    return [t.name for t in dia.analyse_candidates(problem, fit) if t.status == "testable"]
+    fit = fit_model(problem, model)
+    return [t.name for t in analyse_candidates(problem, fit) if t.status == "testable"]
 
 
 def scenarios(system: str) -> list[dict[str, Any]]:
@@ -70,17 +76,15 @@ def scenarios(system: str) -> list[dict[str, Any]]:
 
 def run(system: str, trials: int = 500, seed: int = 2024, n_jobs: int = 2) -> pd.DataFrame:
     """Run the acceptance study of ``system`` and summarise each scenario (one row each)."""
-    from montecarlo.engine.runner import RunOptions, run_study
-    from montecarlo.engine.study import study_from_dict
-
-    module = ge if system == "ground" else ce
+    study_system, defaults = ((sd.GROUND, sd.GROUND_DEFAULTS) if system == "ground"
+                              else (sd.COLLIMATION, sd.COLLIMATION_DEFAULTS))
     cases = scenarios(system)
     keys = sorted({k for c in cases for k in c} - {"label", "named"})
-    converted = [study_params_si(module.STUDY_SYSTEM, {k: c.get(k, module.DEFAULT_PARAMS[k])
-                                                       for k in keys}) for c in cases]
+    converted = [study_params(study_system, {k: c.get(k, defaults[k]) for k in keys})
+                 for c in cases]
     sweep = {f"params.{k}": [c[k] for c in converted] for k in converted[0]}
     raw = {"study": {"name": f"discrepancy_acceptance_{system}",
-                     "system": module.STUDY_SYSTEM.name, "trials": trials, "seed": seed,
+                     "system": study_system.name, "trials": trials, "seed": seed,
                      "per_trial": True},
            "params": {"diagnose": 1}, "sweep": {"mode": "zip", **sweep}}
     study = study_from_dict(raw, f"<acceptance {system}>")
@@ -121,10 +125,10 @@ def _mean(values: np.ndarray) -> float:
 def injected_text(system: str, case: dict[str, Any]) -> str:
     """The injected parameters of a scenario in display units (the design's MDB multiple)."""
     if system == "ground":
-        p = ge.DEFAULT_PARAMS
+        p = sd.GROUND_DEFAULTS
         camera = Camera(p["fov_yaw"], p["fov_pitch"], p["n_x"], p["n_z"])
         truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", "c", "k")}
-        layout = ge.default_layout(camera, truth)
+        layout = sd.default_layout(camera, truth)
 
         def exact(tr):
             return ge.exact_problem(layout, camera, tr, float(p["pixel_sigma"]),
@@ -132,7 +136,7 @@ def injected_text(system: str, case: dict[str, Any]) -> str:
         unit = ge.display_unit
         shown_base = set() if case["expected"] else {"c", "k"}
     else:
-        p = ce.DEFAULT_PARAMS
+        p = sd.COLLIMATION_DEFAULTS
         sigma = math.hypot(p["theodolite_sigma"], p["ins_sigma"])
         truth = {"frame_heading": float(p["frame_heading"]),
                  **{k: case[k] for k in ("axis_az", "axis_el") if k in case}}
@@ -143,7 +147,7 @@ def injected_text(system: str, case: dict[str, Any]) -> str:
         unit = ce.display_unit
         shown_base = {"axis_az", "axis_el"}
     if case["inject_mdb"] > 0:
-        truth = dia.inject_at_mdb(exact, truth, case["expected"], case["inject_mdb"])
+        truth = inject_at_mdb(exact, truth, case["expected"], case["inject_mdb"])
     own = set(exact(truth).effect(case["expected"]).parameters) if case["expected"] else set()
     shown = {k: v for k, v in truth.items() if (k in own or k in shown_base) and v != 0.0}
     return ", ".join(f"{k} = {v / unit(k)[1]:.3g}{'' if unit(k)[0] == '1' else ' ' + unit(k)[0]}"

@@ -27,11 +27,11 @@ from typing import Any
 import numpy as np
 import psutil
 
-from montecarlo.seed000 import ground
 from montecarlo.engine.aggregate import PointStats
 from montecarlo.engine.distributions import Streams
 from montecarlo.engine.runner import RunOptions, run_study
-from montecarlo.engine.study import study_from_dict
+from montecarlo.seed000 import ground
+from montecarlo.systems import study_from_dict
 
 WORKLOAD = {
     "study": {"name": "bench", "system": "ground", "trials": 1, "seed": 1},

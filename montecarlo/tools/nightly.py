@@ -24,13 +24,13 @@ import numpy as np
 import pandas as pd
 
 from montecarlo import __version__
+from montecarlo.engine.runner import Checkpoints, RunOptions, run_study
 from montecarlo.io.files import atomic_write_bytes
 from montecarlo.output.outputs import write_outputs
 from montecarlo.output.provenance import git_commit
 from montecarlo.output.report import markdown_table
-from montecarlo.engine.runner import Checkpoints, RunOptions, run_study
-from montecarlo.engine.study import load_study
 from montecarlo.seed000.table1 import TABLE1_ROWS
+from montecarlo.systems import load_study
 
 TABLE1_TOLERANCE = 0.01
 TREND_BASE = {"geometry.L_m": 100.0, "geometry.H_m": 2.0, "errors.pixel_px.bound": 0.5,

@@ -1,0 +1,189 @@
+"""Calibration design: ``size`` and ``budget``."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+
+from montecarlo.cli.common import (
+    float_of,
+    knob_assignment,
+    nonnegative_int,
+    positive,
+    positive_int,
+)
+from montecarlo.errors import InputError
+
+
+def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
+    """The base ground design (--study or the built-in one) and its [spec] table, if any."""
+    import tomllib
+
+    from montecarlo.design import sizing
+
+    if args.study is None:
+        return sizing.DEFAULT_DESIGN, None
+    try:
+        raw = tomllib.loads(Path(args.study).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{args.study}: no such study file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{args.study}: not valid TOML: {exc}") from None
+    return raw, raw.get("spec")
+
+
+def _requirement(args: argparse.Namespace, spec: dict | None):
+    from montecarlo.design.sizing import Requirement
+
+    spec = spec or {}
+    limit = args.limit if args.limit is not None else spec.get("limit")
+    if limit is None:
+        raise InputError("--limit: required (the study file has no [spec] limit)")
+    return Requirement(limit=float(limit), metric=args.metric or spec.get("metric",
+                                                                            "rotation_angle"),
+                       statistic=args.statistic or spec.get("statistic", "p95"),
+                       confidence=args.confidence,
+                       variant=args.variant or spec.get("variant") or "normalised")
+
+
+def _cmd_size(args: argparse.Namespace) -> int:
+
+    from montecarlo.design import sizing
+
+    base, spec = _design_base(args)
+    weights = {n: float_of("--weight", n, v) for n, v in args.weight}
+    if args.vary:
+        bounds = {}
+        for name, text in args.vary:
+            lo, sep, hi = text.partition(":")
+            bounds[name] = (float_of("--vary", name, lo),
+                            float_of("--vary", name, hi if sep else lo))
+    else:
+        bounds = dict(sizing.DEFAULT_BOUNDS)
+    unknown = set(weights) - set(bounds)
+    if unknown:
+        raise InputError(f"--weight: {', '.join(sorted(unknown))} is not a varied knob")
+    knobs = tuple(sizing.Knob(n, lo, hi, weights.get(n, 1.0)) for n, (lo, hi) in bounds.items())
+    problem = sizing.SizingProblem(base, _requirement(args, spec), knobs)
+    order = tuple(k.strip() for k in args.order.split(",")) if args.order else None
+    options = sizing.SizingOptions(levels=args.levels, trials=args.trials, seed=args.seed,
+                                   tolerance=args.tolerance,
+                                   replication_margin=not args.no_margin, order=order,
+                                   n_jobs=args.n_jobs)
+    confirm_seed = None if args.no_confirm else (
+        args.confirm_seed if args.confirm_seed is not None else args.seed + 1)
+    result = sizing.size(problem, options, relations=args.relations, confirm_seed=confirm_seed)
+    out = Path(args.out)
+    sizing.write_outputs(result, out)
+    print(sizing.format_result(result))
+    print(f"\nwritten to {out}/ (report.md, frontier.png, answers.csv, grid-*.csv, corners-*.csv)")
+    return 0
+
+
+def _cmd_budget(args: argparse.Namespace) -> int:
+
+    from montecarlo.design import budget, sizing
+
+    base, spec = _design_base(args)
+    point = {n: float_of("--point", n, v) for n, v in args.point}
+    for n in point:
+        if n not in sizing.KNOBS:
+            raise InputError(f"--point {n}: unknown knob; choose from {', '.join(sizing.KNOBS)}")
+    if args.from_sizing and point:
+        raise InputError("--from-sizing: give either --point or --from-sizing, not both")
+    points = _sizing_answers(args.from_sizing, args.relations) if args.from_sizing \
+        else dict.fromkeys(args.relations, point)
+    req = _requirement(args, spec)
+    results = [budget.budget(base, req, rel, pt, samples=args.samples, seed=args.seed,
+                             trials=args.trials, resamples=args.resamples, n_jobs=args.n_jobs)
+               for rel, pt in points.items()]
+    out = Path(args.out)
+    budget.write_budget(results, out)
+    for r in results:
+        print(budget.format_budget(r))
+        print()
+    print(f"written to {out}/ (report.md, budget.png, budget-*.csv)")
+    return 0
+
+
+def _sizing_answers(path: str, relations: Sequence[str]) -> dict[str, dict[str, float]]:
+    """Each relation's answer (knob -> value) from a sizing run's answers.csv."""
+    from montecarlo.design.sizing import KNOBS, RELATIONS
+    from montecarlo.io.table import read_table
+
+    table = read_table(path, (), text=("pixel_relation",), choices={"pixel_relation": RELATIONS})
+    knobs = [c for c in table.columns if c in KNOBS]
+    points = {}
+    for row, (_, r) in enumerate(table.iterrows(), start=2):
+        rel = r["pixel_relation"]
+        if rel not in relations:
+            continue
+        if all(str(r[k]).strip() == "" for k in knobs):
+            raise InputError(f"{path}: row {row}: no answer for pixel relation {rel!r} "
+                             f"(nothing met the spec); leave it out with --relations")
+        points[rel] = {k: float_of(f"{path}: row {row}: column", k, r[k]) for k in knobs}
+    if not points:
+        raise InputError(f"{path}: no row for pixel relation(s) {', '.join(relations)}")
+    return points
+
+
+def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--study", help="base ground study (TOML); default: seed 000's Table 1 set-up "
+                   "with the distributions of studies/range_sizing.toml")
+    p.add_argument("--metric", help="metric (default: the study's [spec] or rotation_angle)")
+    p.add_argument("--variant", help="solver variant (default: [spec] or normalised)")
+    p.add_argument("--statistic", choices=("p50", "p90", "p95", "p99"),
+                   help="percentile of the spec (default: [spec] or p95)")
+    p.add_argument("--limit", type=positive, help="spec limit in the metric's display unit "
+                   "(mrad for angles; default: the study's [spec])")
+    p.add_argument("--confidence", type=float, default=0.9,
+                   help="confidence of the percentile bounds (default 0.9)")
+    p.add_argument("--relations", nargs="+", choices=("common", "independent"),
+                   default=["common", "independent"], help="pixel-noise relations (both)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
+    p.add_argument("--n-jobs", type=positive_int, default=2, help="parallel workers (2)")
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("size", help="cheapest range, mast, centroid and survey that meet a spec "
+                       "(Pareto corners, common and independent pixel noise)")
+    _add_spec_arguments(p)
+    p.add_argument("--vary", action="append", type=knob_assignment, default=[],
+                   metavar="KNOB=LO:HI", help="a knob and its bounds (repeatable; LO alone fixes "
+                   "it); knobs: L_m, H_m, pixel_px, survey_m, scale_m; default: all five with "
+                   "L 25:400, H 0.5:10, pixel 0.05:1, survey 0.01:0.2, scale 0.0002:0.005")
+    p.add_argument("--weight", action="append", type=knob_assignment, default=[],
+                   metavar="KNOB=W", help="cost of one doubling of a knob (default 1)")
+    p.add_argument("--order", help="lexicographic cost instead of weights: KNOB,KNOB,... "
+                   "(minimise the first, then the second, ...)")
+    p.add_argument("--levels", type=positive_int, default=3,
+                   help="grid levels per knob (default 3)")
+    p.add_argument("--trials", type=positive_int, default=10000,
+                   help="trials per evaluated design (default 10000)")
+    p.add_argument("--tolerance", type=positive, default=0.02,
+                   help="bisection stops at this relative bracket (default 0.02)")
+    p.add_argument("--no-margin", action="store_true",
+                   help="no replication margin: return the boundary of 'meets' itself")
+    p.add_argument("--confirm-seed", type=nonnegative_int,
+                   help="seed of the independent confirmation run (default seed + 1)")
+    p.add_argument("--no-confirm", action="store_true", help="skip the confirmation run")
+    p.add_argument("--out", default="results/sizing", help="output directory")
+    p.set_defaults(func=_cmd_size)
+
+    p = sub.add_parser("budget", help="Sobol variance shares of each error source and a split "
+                       "of the spec among them, at a design point")
+    _add_spec_arguments(p)
+    p.add_argument("--point", action="append", type=knob_assignment, default=[],
+                   metavar="KNOB=VALUE", help="design point as sizing knobs (repeatable), e.g. "
+                   "L_m=50 H_m=5 pixel_px=0.2; default: the base study's values")
+    p.add_argument("--from-sizing", metavar="ANSWERS.csv",
+                   help="take each relation's design point from a sizing run's answers.csv")
+    p.add_argument("--samples", type=positive_int, default=8192,
+                   help="Sobol base sample size, a power of 2 (default 8192)")
+    p.add_argument("--resamples", type=positive_int, default=200,
+                   help="bootstrap resamples for the Sobol intervals (default 200)")
+    p.add_argument("--trials", type=positive_int, default=20000,
+                   help="trials of the study runs (design total, sources alone; default 20000)")
+    p.add_argument("--out", default="results/budget", help="output directory")
+    p.set_defaults(func=_cmd_budget)

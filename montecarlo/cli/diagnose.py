@@ -1,0 +1,238 @@
+"""The discrepancy workflow: ``diagnose ground | collimation``, ``synth ground | collimation``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import numpy as np
+
+from montecarlo.cli.common import (
+    Parser,
+    nonnegative,
+    nonnegative_int,
+    positive,
+    positive_int,
+    probability,
+    write_text,
+)
+from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy import synth
+from montecarlo.discrepancy.engine import Diagnosis, diagnose
+from montecarlo.discrepancy.fit import FitError
+from montecarlo.discrepancy.view import SystemView, format_text, to_json
+from montecarlo.errors import InputError
+from montecarlo.geometry.camera import Camera
+from montecarlo.io.collimation_csv import read_mirror_csv, write_mirror_csv
+from montecarlo.io.ground_csv import GroundData, read_ground_csv, write_ground_csv
+from montecarlo.seed003.model import Noise
+from montecarlo.units import ARCSEC
+
+
+def _unit(unit: str) -> str:
+    return "" if unit == "1" else f" {unit}"
+
+
+def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
+                      source: str) -> int:
+    report = to_json(d, view, source)
+    if args.report:
+        from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
+        from montecarlo.systems.discrepancy import monte_carlo_gap
+
+        mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
+            if args.trials > 0 else None
+        write_report(args.report, d, view, report, mc, args.trials, args.seed)
+    if args.json:
+        write_text(args.json, json.dumps(report, indent=2) + "\n")
+    print(format_text(report))
+    if args.report:
+        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
+              "gap.png)")
+    return 0
+
+
+def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
+
+    try:
+        camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
+                                     args.pixels[1])
+    except ValueError as exc:
+        raise InputError(f"montecarlo diagnose ground: {exc}") from None
+    data = read_ground_csv(args.data, camera, ge.min_targets(), "3 mounting angles + up to 3 "
+                           "parameters of an effect + 1 degree of freedom, 2 image coordinates "
+                           "per row")
+    ge.check_in_front(data, camera, str(args.data))
+    sigma, survey = args.pixel_sigma, args.survey_sigma_m
+    try:
+        d = diagnose(ge.ground_problem(data, camera, sigma, survey), args.alpha)
+    except FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey),
+                             str(args.data))
+
+
+def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
+
+    data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
+                           "of an effect + 1 degree of freedom, 2 readings per mirror")
+    sigma = args.angle_sigma_arcsec * ARCSEC
+    try:
+        d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
+    except FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+
+
+def _cmd_synth_ground(args: argparse.Namespace) -> int:
+
+    try:
+        camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
+                                     args.pixels[1])
+    except ValueError as exc:
+        raise InputError(f"montecarlo synth ground: {exc}") from None
+    candidates = {c.name: c for c in ge.candidates_for(GroundData(
+        (), np.zeros((0, 3)), np.zeros((0, 2)), None, None if args.sessions < 2 else
+        tuple(f"S{i + 1}" for i in range(args.sessions))))[0] if c.parameters}
+    effects = synth.parse_effects(args.effect, candidates, ge.display_unit)
+    at_mdb = synth.parse_multiples(args.at_mdb, candidates)
+    mounting = dict(zip(("psi", "theta", "gamma"), map(math.radians, args.mounting_deg),
+                        strict=True))
+    data, truth, dropped = synth.synth_ground(
+        seed=args.seed, camera=camera, pixel_sigma=args.pixel_sigma,
+        survey_sigma=args.survey_sigma_m, mounting=mounting, ranges=args.ranges_m,
+        grid=tuple(args.grid), spread=args.spread, duration=args.duration_s,
+        sessions=args.sessions, effects=effects, at_mdb=at_mdb,
+        atmosphere=not args.no_atmosphere, with_time=not args.no_time)
+    if data.n < ge.min_targets():
+        raise InputError(f"montecarlo synth ground: only {data.n} targets on the detector")
+    write_ground_csv(args.out, data)
+    if args.truth:
+        write_text(args.truth, synth.truth_report(
+            "ground", args.seed, truth, ge.display_unit, pixel_sigma=args.pixel_sigma,
+            survey_sigma_m=args.survey_sigma_m, dropped_targets=dropped))
+    shown = {k: v / ge.display_unit(k)[1] for k, v in truth.items()
+             if k not in ("psi", "theta", "gamma") and v != 0.0}
+    print(f"wrote {args.out}: {data.n} observations ({dropped} off the detector dropped), "
+          f"seed {args.seed}; injected: "
+          + (", ".join(f"{k} = {v:.4g}{_unit(ge.display_unit(k)[0])}" for k, v in shown.items())
+             or "nothing"))
+    return 0
+
+
+def _cmd_synth_collimation(args: argparse.Namespace) -> int:
+
+    candidates = {c.name: c for c in ce.CANDIDATES}
+    effects = synth.parse_effects(args.effect, candidates, ce.display_unit)
+    at_mdb = synth.parse_multiples(args.at_mdb, candidates)
+    ins = args.ins_sigma_arcsec * ARCSEC
+    noise = Noise(args.theodolite_sigma_arcsec * ARCSEC, ins, ins, ins,
+                      math.radians(args.mount_roll_sigma_deg))
+    data, truth = synth.synth_collimation(
+        seed=args.seed, n_azimuth=args.n_azimuth, n_pitch=args.n_pitch,
+        azimuth_span=math.radians(args.azimuth_span_deg),
+        pitch_span=math.radians(args.pitch_span_deg),
+        frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
+        at_mdb=at_mdb, with_roll=args.with_roll or args.mount_roll_sigma_deg > 0)
+    write_mirror_csv(args.out, data)
+    sigma = math.hypot(args.theodolite_sigma_arcsec, args.ins_sigma_arcsec)
+    if args.truth:
+        write_text(args.truth, synth.truth_report(
+            "collimation", args.seed, truth, ce.display_unit, angle_sigma_arcsec=sigma))
+    shown = {k: v / ce.display_unit(k)[1] for k, v in truth.items()
+             if k != "frame_heading" and v != 0.0}
+    print(f"wrote {args.out}: {len(data.mirror)} mirrors, seed {args.seed}; diagnose with "
+          f"--angle-sigma-arcsec {sigma:.4g}; injected: "
+          + (", ".join(f"{k} = {v:.4g}{_unit(ce.display_unit(k)[0])}" for k, v in shown.items())
+             or "nothing"))
+    return 0
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    diag = sub.add_parser("diagnose", help="detect, identify and adapt a missing effect in "
+                          "measured data")
+    dsub = diag.add_subparsers(dest="diagnose_command", required=True, parser_class=Parser)
+
+    def common(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--json", metavar="OUT.json", help="write the diagnosis as JSON")
+        p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and "
+                       "plots (residuals, gap, Monte Carlo of the residual statistic)")
+        p.add_argument("--alpha", type=probability, default=0.01,
+                       help="significance of the tests (default 0.01)")
+        p.add_argument("--trials", type=nonnegative_int, default=200,
+                       help="Monte Carlo data sets per model in --report (default 200; 0: none)")
+        p.add_argument("--seed", type=nonnegative_int, default=0,
+                       help="seed of the --report Monte Carlo (default 0)")
+        p.add_argument("--n-jobs", type=positive_int, default=1,
+                       help="workers of the --report Monte Carlo (default 1)")
+
+    p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")
+    p.add_argument("data", help="CSV: target, x_m, y_m, z_m, px, pz[, t_s][, session]")
+    p.add_argument("--fov-deg", type=positive, nargs=2, required=True, metavar=("FY", "FP"),
+                   help="full fields of view about z (yaw) and x (pitch) [deg]")
+    p.add_argument("--pixels", type=positive_int, nargs=2, required=True,
+                   metavar=("NX", "NZ"), help="pixel counts across x and z")
+    p.add_argument("--pixel-sigma", type=positive, required=True, metavar="S",
+                   help="standard deviation of each image coordinate [px]")
+    p.add_argument("--survey-sigma-m", type=nonnegative, default=0.0, metavar="S",
+                   help="standard deviation of each surveyed coordinate [m] (default 0)")
+    common(p)
+    p.set_defaults(func=_cmd_diagnose_ground)
+
+    p = dsub.add_parser("collimation", help="autocollimator-INS mirror readings (seed 003)")
+    p.add_argument("data", help="CSV: mirror, set, theodolite_az_deg, theodolite_el_deg, "
+                   "ins_az_deg, ins_el_deg[, ins_roll_deg]")
+    p.add_argument("--angle-sigma-arcsec", type=positive, required=True, metavar="S",
+                   help="standard deviation of each heading and pitch residual [arc-seconds]")
+    common(p)
+    p.set_defaults(func=_cmd_diagnose_collimation)
+
+    syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
+    ssub = syn.add_subparsers(dest="synth_command", required=True, parser_class=Parser)
+
+    def effect_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("out", help="CSV file to write")
+        p.add_argument("--seed", type=nonnegative_int, default=0)
+        p.add_argument("--effect", action="append", default=[], metavar="NAME=V[,V...]",
+                       help="inject an effect, one value per parameter in report units "
+                       "(repeatable)")
+        p.add_argument("--at-mdb", action="append", default=[], metavar="NAME=MULT",
+                       help="inject an effect at MULT times its minimal detectable bias "
+                       "(repeatable)")
+        p.add_argument("--truth", metavar="OUT.json", help="also write how the data were made")
+
+    p = ssub.add_parser("ground", help="targets spread over the field at several ranges")
+    effect_options(p)
+    p.add_argument("--fov-deg", type=positive, nargs=2, default=[90.0, 90.0])
+    p.add_argument("--pixels", type=positive_int, nargs=2, default=[512, 512])
+    p.add_argument("--pixel-sigma", type=nonnegative, default=0.3, help="[px] (0.3)")
+    p.add_argument("--survey-sigma-m", type=nonnegative, default=0.01, help="[m] (0.01)")
+    p.add_argument("--mounting-deg", type=float, nargs=3, default=[30.0, 20.0, 10.0],
+                   metavar=("PSI", "THETA", "GAMMA"), help="true mounting (seed 000: 30 20 10)")
+    p.add_argument("--ranges-m", type=positive, nargs="+", default=[50.0, 100.0])
+    p.add_argument("--grid", type=positive_int, nargs=2, default=[6, 6],
+                   metavar=("NX", "NZ"), help="targets across and up the field (6 6)")
+    p.add_argument("--spread", type=positive, default=0.8,
+                   help="fraction of the field covered (0.8)")
+    p.add_argument("--duration-s", type=nonnegative, default=3600.0)
+    p.add_argument("--sessions", type=positive_int, default=1,
+                   help="observe the layout in this many sessions (session column if > 1)")
+    p.add_argument("--no-atmosphere", action="store_true",
+                   help="no earth curvature and refraction (default: physical c = 1, k = 0.13)")
+    p.add_argument("--no-time", action="store_true", help="omit the t_s column")
+    p.set_defaults(func=_cmd_synth_ground)
+
+    p = ssub.add_parser("collimation", help="seed 003 fixture: azimuth and pitch mirrors")
+    effect_options(p)
+    p.add_argument("--n-azimuth", type=positive_int, default=7)
+    p.add_argument("--n-pitch", type=positive_int, default=7)
+    p.add_argument("--azimuth-span-deg", type=float, default=90.0)
+    p.add_argument("--pitch-span-deg", type=float, default=60.0)
+    p.add_argument("--frame-heading-deg", type=float, default=30.0)
+    p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, default=2.0)
+    p.add_argument("--ins-sigma-arcsec", type=nonnegative, default=2.0)
+    p.add_argument("--mount-roll-sigma-deg", type=nonnegative, default=0.0)
+    p.add_argument("--with-roll", action="store_true", help="write the ins_roll_deg column")
+    p.set_defaults(func=_cmd_synth_collimation)

@@ -1,0 +1,99 @@
+"""Seed 000 reproductions: ``table1``, ``air``, ``transfer-alignment``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from montecarlo.cli.common import (
+    positive_int,
+)
+from montecarlo.errors import InputError
+
+
+def _cmd_table1(args: argparse.Namespace) -> int:
+    from montecarlo.seed000 import table1
+
+    table = table1.reproduce_table1()
+    if args.json:
+        rows = table[list(table1.JSON_KEYS)].to_dict(orient="records")
+        print(json.dumps(rows, indent=2))
+    else:
+        print(table1.format_table1(table))
+    return 0
+
+
+def _cmd_air(args: argparse.Namespace) -> int:
+    from montecarlo.seed000 import air
+
+    table = air.reproduce_paper(n=args.trials, rng=args.seed)
+    if args.json:
+        out = {
+            "paper_mrad": {"one_sigma": air.PAPER_1SIGMA / air.MRAD,
+                           "three_sigma": air.PAPER_3SIGMA / air.MRAD},
+            "rss_of_inputs_mrad": air.rss_of_inputs() / air.MRAD,
+            "one_d_from_1sigma_inputs_mrad": {
+                k: v / air.MRAD for k, v in air.one_sigma_rotation(1).items()},
+            "consistent_readings": air.consistent_readings(table).to_dict(orient="records"),
+            "seed": args.seed,
+            "rows": table.to_dict(orient="records"),
+        }
+        print(json.dumps(out, indent=2))
+    else:
+        print(air.format_reproduction(table))
+    return 0
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("table1", help="reproduce seed 000, Table 1 and compare with the paper")
+    p.add_argument("--json", action="store_true", help="print a JSON list of six rows")
+    p.set_defaults(func=_cmd_table1)
+
+    p = sub.add_parser("air", help="seed 000, section 2: reproduce 1.70 / 5.10 mrad of the air "
+                       "dynamic calibration with every rotation metric")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.add_argument("--trials", type=positive_int, default=200_000,
+                   help="Monte Carlo trials per reading (default 200000)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(func=_cmd_air)
+    _add_transfer_alignment_commands(sub)
+
+
+def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
+    from montecarlo.seed000 import transfer_alignment as ta
+
+    try:
+        cfg = ta.AlignmentConfig(manoeuvre=args.manoeuvre, duration=args.duration,
+                                 bank=math.radians(args.bank), period=args.period,
+                                 attitude_matching=args.attitude_matching)
+    except ValueError as exc:
+        raise InputError(f"montecarlo transfer-alignment: {exc}") from None
+    table = ta.table2_grid(cfg, rng=args.seed, runs=args.runs)
+    if args.json:
+        print(json.dumps({"config": ta.describe(cfg), "seed": args.seed,
+                          "rows": table.to_dict(orient="records")}, indent=2))
+    else:
+        print(ta.format_table2(table, cfg))
+    return 0
+
+
+def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("transfer-alignment", help="seed 000, Table 2: Kalman-filter transfer "
+                       "alignment for the five IMU grades, paper vs ours")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.add_argument("--runs", type=positive_int, default=100,
+                   help="Monte Carlo runs per IMU grade (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--manoeuvre", default="s_turn",
+                   help="flight profile: s_turn (default), wing_rock or level")
+    p.add_argument("--duration", type=float, default=120.0,
+                   help="alignment time [s] (default 120)")
+    p.add_argument("--bank", type=float, default=30.0,
+                   help="peak bank of the S-turn, roll amplitude of the wing rock [deg] "
+                   "(default 30)")
+    p.add_argument("--period", type=float, default=60.0,
+                   help="period of the S-turn or the wing rock [s] (default 60)")
+    p.add_argument("--attitude-matching", action="store_true",
+                   help="add attitude matching to velocity matching")
+    p.set_defaults(func=_cmd_transfer_alignment)

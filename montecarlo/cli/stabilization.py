@@ -1,0 +1,181 @@
+"""Seed 001: ``stabilization simulate | estimate | observability``."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+import numpy as np
+
+from montecarlo.cli.common import (
+    Parser,
+)
+from montecarlo.errors import InputError
+from montecarlo.geometry.camera import Camera
+from montecarlo.io.stabilization_csv import read_csv, write_csv
+from montecarlo.seed001.estimate import PARAMETER_NAMES, estimate
+from montecarlo.seed001.kinematics import Rocking
+from montecarlo.seed001.linear_model import OBSERVABLE_NAMES, observability
+from montecarlo.seed001.simulate import Setup, simulate
+from montecarlo.units import ARCMIN, DEG_PER_HOUR, DEG_PER_ROOT_HOUR
+
+
+def _stabilization_camera(args: argparse.Namespace):
+    if not 0.0 < args.fov_deg < 180.0 or args.pixels <= 0:
+        raise InputError(f"--fov-deg must be in (0, 180) and --pixels positive, got "
+                         f"{args.fov_deg} and {args.pixels}")
+    return Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
+
+
+def _stabilization_setup(args: argparse.Namespace):
+
+    if args.duration <= 0.0 or args.rate <= 0.0:
+        raise InputError(f"--duration and --rate must be positive, got {args.duration} and "
+                         f"{args.rate}")
+    rocking = Rocking(np.radians(args.rock_amp_deg), args.rock_freq_hz,
+                           np.radians(args.rock_phase_deg))
+    setup = Setup(duration=args.duration, rate=args.rate,
+                       aim_azimuth=np.radians(args.aim_deg[0]),
+                       aim_pitch=np.radians(args.aim_deg[1]), camera=_stabilization_camera(args),
+                       image_noise=args.image_noise_px,
+                       gyro_noise=args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR)
+    return rocking, setup
+
+
+def _cmd_stabilization_simulate(args: argparse.Namespace) -> int:
+
+    rocking, setup = _stabilization_setup(args)
+    delta_g = np.asarray(args.delta_g_arcmin) * ARCMIN
+    delta_p = np.asarray(args.delta_p_arcmin) * ARCMIN
+    bias = np.asarray(args.gyro_bias_deg_per_h) * DEG_PER_HOUR
+    record = simulate(rocking, setup, delta_g, delta_p, bias, rng=args.seed)
+    write_csv(args.out, record)
+    truth = {"delta_px": delta_p[0], "delta_gx": delta_g[0], "delta_gy": delta_g[1],
+             "delta_z": delta_p[2] - delta_g[2], "delta_py": delta_p[1]}
+    print(f"wrote {args.out}: {record.t.size} rows, {setup.duration:g} s at {setup.rate:g} Hz")
+    print("true values [arcmin]: " + ", ".join(f"{k} = {v / ARCMIN:.4f}"
+                                                for k, v in truth.items()))
+    print(f"LOS stabilisation error RMS: {np.sqrt(np.mean(record.los_error**2)) / ARCMIN:.4f}"
+          " arcmin")
+    return 0
+
+
+def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
+
+    if not 0.0 < args.forgetting <= 1.0 or args.passes < 1 or args.image_noise_px <= 0.0:
+        raise InputError("--forgetting must be in (0, 1], --passes >= 1, --image-noise-px > 0")
+    record = read_csv(args.csv)
+    est = estimate(record.t, record.gyro, record.eta, record.eps, record.los_px,
+                      _stabilization_camera(args), args.image_noise_px,
+                      args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR,
+                      forgetting=args.forgetting, max_passes=args.passes)
+    units = [ARCMIN] * 5 + [DEG_PER_HOUR] * 3
+    rows = {name: (float(v / u), float(s / u)) for name, v, s, u in
+            zip(PARAMETER_NAMES, est.values, est.sigma, units, strict=True)}
+    if args.json:
+        print(json.dumps({
+            "file": str(args.csv), "rows": int(record.t.size), "passes": est.passes,
+            "converged": bool(est.converged), "residual_rms_px": float(est.residual_rms),
+            "units": {"delta_*": "arcmin", "bias_*": "deg/h", "sigma": "1 standard deviation"},
+            "parameters": {k: {"value": v, "sigma": s} for k, (v, s) in rows.items()},
+        }, indent=2))
+        return 0
+    if args.passes == 1:
+        state = "the patent's single linear pass about zero (error ~ angles squared)"
+    else:
+        state = "converged" if est.converged else "NOT converged: raise --passes"
+    print(f"installation angles (seed 001) from {args.csv}: {record.t.size} rows, "
+          f"{record.t[-1] - record.t[0]:g} s; {est.passes} RLS passes, {state}")
+    print("angles in arc-minutes (1 arcmin = 0.2909 mrad), gyro biases in deg/h; "
+          "± is one standard deviation")
+    notes = {"delta_z": "= dpz - dgz (dpz and dgz are not separable)",
+             "delta_py": "camera roll about the LOS (seen only at second order)"}
+    for name, (v, s) in rows.items():
+        unit = "arcmin" if name.startswith("delta") else "deg/h"
+        print(f"  {name:9s} {v:12.4f} ± {s:8.4f} {unit:7s}{notes.get(name, '')}")
+    print(f"image residual RMS: {float(est.residual_rms):.3f} px (includes the LOS walk of gyro "
+          f"noise; image noise assumed {args.image_noise_px:g} px per axis)")
+    return 0
+
+
+def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
+
+    rocking, setup = _stabilization_setup(args)
+    record = simulate(rocking, dataclasses.replace(setup, gyro_noise=0.0), 0.0, 0.0)
+    obs = observability(record, setup.camera, setup.image_noise)
+    print(f"rank {obs.rank} of 4 for X = [delta_px, delta_gx, delta_gy, delta_z]; "
+          f"rank {obs.raw_rank} of 5 for [dpx, dpz, dgx, dgy, dgz]")
+    for row in obs.raw_null_space:
+        print("  unseen direction of [dpx, dpz, dgx, dgy, dgz]: "
+              + "[" + ", ".join(f"{x:+.3f}" for x in row) + "]")
+    print("Cramer-Rao sigma from image noise (gyro biases and aim point estimated too) "
+          "[arcmin]:")
+    for name, sigma in zip(OBSERVABLE_NAMES, obs.sigma, strict=True):
+        print(f"  {name:9s} {sigma / ARCMIN:10.4f}" if np.isfinite(sigma)
+              else f"  {name:9s} not observable")
+    return 0
+
+
+def _add_stabilization_profile(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--duration", type=float, default=60.0, help="run length [s] (60)")
+    p.add_argument("--rate", type=float, default=100.0,
+                   help="gyro, gimbal-loop and camera frame rate [Hz] (100)")
+    p.add_argument("--rock-amp-deg", type=float, nargs=3, default=[5.0, 5.0, 5.0],
+                   metavar=("YAW", "PITCH", "ROLL"), help="rocking amplitudes [deg] (5 5 5)")
+    p.add_argument("--rock-freq-hz", type=float, nargs=3, default=[0.25, 0.4, 0.32],
+                   metavar=("YAW", "PITCH", "ROLL"),
+                   help="rocking frequencies [Hz] (0.25 0.4 0.32)")
+    p.add_argument("--rock-phase-deg", type=float, nargs=3, default=[0.0, 60.0, 120.0],
+                   metavar=("YAW", "PITCH", "ROLL"), help="rocking phases [deg] (0 60 120)")
+    p.add_argument("--aim-deg", type=float, nargs=2, default=[20.0, 10.0],
+                   metavar=("AZIMUTH", "PITCH"), help="gimbal angles at the start [deg] (20 10)")
+    p.add_argument("--image-noise-px", type=float, default=0.1,
+                   help="image noise per axis [px] (0.1)")
+    p.add_argument("--gyro-arw-deg-per-rt-h", type=float, default=0.01,
+                   help="gyro angle random walk [deg/sqrt(h)] (0.01)")
+
+
+def _add_stabilization_camera(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--fov-deg", type=float, default=5.0, help="square field of view [deg] (5)")
+    p.add_argument("--pixels", type=int, default=1024, help="pixels across the image (1024)")
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("stabilization", help="seed 001: installation angles of a gyro "
+                       "indirect-stabilisation gimbal from the image drift of a target")
+    ssub = p.add_subparsers(dest="stabilization_command", required=True, parser_class=Parser)
+
+    sim = ssub.add_parser("simulate", help="simulate a rocking run and write it as CSV")
+    sim.add_argument("out", help="CSV file to write (t_s, gyro_x, gyro_y, gyro_z, eta_rad, "
+                     "eps_rad, los_x_px, los_z_px)")
+    _add_stabilization_profile(sim)
+    _add_stabilization_camera(sim)
+    sim.add_argument("--delta-g-arcmin", type=float, nargs=3, default=[30.0, -18.0, 42.0],
+                     metavar=("GX", "GY", "GZ"), help="IMU installation angles [arcmin]")
+    sim.add_argument("--delta-p-arcmin", type=float, nargs=3, default=[24.0, 0.0, -36.0],
+                     metavar=("PX", "PY", "PZ"), help="camera installation angles [arcmin]")
+    sim.add_argument("--gyro-bias-deg-per-h", type=float, nargs=3, default=[0.0, 0.0, 0.0],
+                     metavar=("X", "Y", "Z"), help="gyro biases [deg/h] (0 0 0)")
+    sim.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    sim.set_defaults(func=_cmd_stabilization_simulate)
+
+    est = ssub.add_parser("estimate", help="estimate installation angles from a CSV run")
+    est.add_argument("csv", help="CSV file with the columns written by 'simulate'")
+    _add_stabilization_camera(est)
+    est.add_argument("--image-noise-px", type=float, default=0.1,
+                     help="image noise per axis [px] (0.1)")
+    est.add_argument("--gyro-arw-deg-per-rt-h", type=float, default=0.01,
+                     help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
+    est.add_argument("--forgetting", type=float, default=1.0,
+                     help="RLS forgetting factor in (0, 1] (1: none)")
+    est.add_argument("--passes", type=int, default=10,
+                     help="most RLS passes (1: the patent's single linear pass) (10)")
+    est.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    est.set_defaults(func=_cmd_stabilization_estimate)
+
+    obs = ssub.add_parser("observability", help="rank and Cramer-Rao bounds of a rocking "
+                          "profile")
+    _add_stabilization_profile(obs)
+    _add_stabilization_camera(obs)
+    obs.set_defaults(func=_cmd_stabilization_observability)

@@ -1,0 +1,89 @@
+"""Commands that run studies: ``run``, ``nightly``, ``bench``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from montecarlo.cli.common import (
+    nonnegative_int,
+    positive_int,
+)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+
+    from montecarlo.engine.runner import Checkpoints, RunOptions, run_study
+    from montecarlo.systems import load_study
+
+    study = load_study(args.study, trials=args.trials, seed=args.seed)
+    out = Path(args.out) if args.out else Path("results") / study.header.name
+    options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
+                         chunk_size=args.chunk_size, progress=not args.quiet,
+                         checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
+    result = run_study(study, options)
+
+    from montecarlo.output.outputs import write_outputs  # matplotlib: only once results exist
+    from montecarlo.output.report import spec_verdicts
+
+    write_outputs(result, out, options)
+    Checkpoints(options.checkpoint_dir, study).remove()
+    verdicts = spec_verdicts(result, result.to_frame())
+    print(f"{study.header.name}: {len(study.points)} grid points written to {out}/ "
+          f"(report.md, summary.csv, plots/)")
+    if verdicts is not None:
+        print(verdicts.to_string(index=False))
+    return 0
+
+
+def _cmd_nightly(args: argparse.Namespace) -> int:
+
+    from montecarlo.tools.nightly import run_nightly
+
+    passed, checks = run_nightly(Path(args.studies), Path(args.out), args.n_jobs,
+                                 progress=not args.quiet)
+    for c in checks:
+        print(f"{'pass' if c.passed else 'FAIL'}  {c.name}: {c.value} (expected {c.expected})")
+    print(f"nightly: {sum(c.passed for c in checks)}/{len(checks)} checks pass; "
+          f"report {args.out}/report.md")
+    return 0 if passed else 1
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from montecarlo.tools.bench import format_bench, run_bench
+
+    result = run_bench(quick=args.quick, repeats=args.repeats)
+    print(json.dumps(result, indent=2) if args.json else format_bench(result))
+    return 0
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="run a study file and write results/<study>/")
+    p.add_argument("study", help="study definition (TOML), e.g. studies/table1.toml")
+    p.add_argument("--n-jobs", type=positive_int, default=2, help="parallel workers (2)")
+    p.add_argument("--backend", choices=("loky", "dask"), default="loky",
+                   help="loky: local processes; dask: a dask.distributed cluster")
+    p.add_argument("--scheduler", help="dask scheduler address (default: start a LocalCluster)")
+    p.add_argument("--trials", type=positive_int, help="override the trials per grid point")
+    p.add_argument("--seed", type=nonnegative_int, help="override the study seed")
+    p.add_argument("--out", help="output directory (default results/<study name>)")
+    p.add_argument("--chunk-size", type=positive_int,
+                   help="trials per task, a multiple of the block size (results do not change)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--reference", action="store_true",
+                   help="use the literal reference implementation instead of the fast kernel")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("nightly", help="rerun Table 1 and the trend checks; exit 1 on regression")
+    p.add_argument("--studies", default="studies", help="directory with table1.toml, trends.toml")
+    p.add_argument("--out", default="results/nightly", help="output directory")
+    p.add_argument("--n-jobs", type=positive_int, default=2)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_nightly)
+
+    p = sub.add_parser("bench", help="trials per second of the reference and fast ground paths")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--quick", action="store_true", help="small sizes (seconds, for tests)")
+    p.add_argument("--repeats", type=positive_int, default=5, help="timed runs per figure (5)")
+    p.set_defaults(func=_cmd_bench)

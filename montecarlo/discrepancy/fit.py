@@ -1,0 +1,88 @@
+"""Nonlinear least-squares fit of a :class:`~montecarlo.discrepancy.problem.Problem`'s model.
+
+The base model plus named candidate effects, candidate parameters within their physical
+bounds (``scipy.optimize.least_squares``), with the whitened Jacobian by central differences.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize
+
+from montecarlo.discrepancy.problem import Problem
+from montecarlo.lsq import LeastSquaresFit
+
+FloatArray = NDArray[np.float64]
+
+
+class FitError(ValueError):
+    """The model cannot be fitted to these data (too few observations, singular design)."""
+
+
+def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]) -> FloatArray:
+    """Whitened design columns ``-d residual / d parameter`` by central differences, (n, k).
+
+    All ``2k`` perturbed parameter vectors go through ``problem.residuals`` in one vectorised
+    call; parameters in ``values`` but not in ``names`` are held at their values.
+    """
+    effect_of = problem.parameter_effect
+    steps = np.array([effect_of[n].steps[effect_of[n].parameters.index(n)] for n in names])
+    k = len(names)
+    batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
+    for j, n in enumerate(names):
+        column = batch.setdefault(n, np.zeros((2 * k, 1)))
+        column[j, 0] += steps[j]
+        column[k + j, 0] -= steps[j]
+    r = problem.residuals(batch)
+    return -((r[:k] - r[k:]) / (2.0 * steps[:, None])).T
+
+
+def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, float] | None = None
+              ) -> LeastSquaresFit:
+    """Fit the base model plus ``effects`` (names of candidates) by nonlinear least squares.
+
+    Candidate parameters are bounded by their physical bounds (``method="trf"``); unspecified
+    starting values are the problem's base start and zero for candidates.
+
+    Raises
+    ------
+    FitError
+        Fewer observations than parameters plus one, or a singular design.
+    """
+    model = (problem.base.name, *[e for e in effects if e != problem.base.name])
+    chosen = [problem.effect(e) for e in model]
+    names = tuple(p for e in chosen for p in e.parameters)
+    bounds = [b for e in chosen for b in e.bounds]
+    lower = np.array([b[0] for b in bounds])
+    upper = np.array([b[1] for b in bounds])
+    guess = {**problem.start, **(start or {})}
+    margin = np.where(np.isfinite(upper - lower), 1e-9 * (upper - lower), 0.0)
+    x0 = np.clip(np.array([float(guess.get(n, 0.0)) for n in names]), lower + margin,
+                 upper - margin)
+    n_obs = problem.residuals(dict(zip(names, x0, strict=True))).size
+    if n_obs < len(names) + 1:
+        raise FitError(f"{n_obs} observations cannot fit {len(names)} parameters with a "
+                       "degree of freedom left")
+
+    def fun(x: FloatArray) -> FloatArray:
+        return problem.residuals(dict(zip(names, x, strict=True)))
+
+    def jac(x: FloatArray) -> FloatArray:
+        return -jacobian(problem, dict(zip(names, x, strict=True)), names)
+
+    bounded = bool(np.isfinite(lower).any() or np.isfinite(upper).any())
+    sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lower, upper),
+                                 method="trf" if bounded else "lm", x_scale="jac",
+                                 xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
+    if not np.all(np.isfinite(sol.fun)):
+        raise FitError("the model gives no finite prediction for these data")
+    A = jacobian(problem, dict(zip(names, sol.x, strict=True)), names)
+    norms = np.linalg.norm(A, axis=0)
+    s = np.linalg.svd(A / np.where(norms > 0, norms, 1.0), compute_uv=False)
+    if norms.min() == 0.0 or s[-1] < 1e-10 * s[0]:
+        raise FitError(f"parameters of {', '.join(model)} are not separable with these data")
+    cov = np.linalg.inv(A.T @ A)
+    return LeastSquaresFit(names, sol.x, cov, fun(sol.x), A, effects=model)

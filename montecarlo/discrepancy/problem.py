@@ -1,0 +1,95 @@
+"""What the discrepancy engine sees of measured data: effects, a base model and candidates.
+
+A :class:`Problem` states the measured data through one function of named parameters, the
+*whitened* residuals ``r = W (observed - predicted)`` (unit variance, uncorrelated when the model
+is right and the stated noise is true), a base model (an :class:`Effect` whose parameters are
+always fitted) and a library of candidate effects, each a parametric extension of the forward
+model that is zero (absent) when its parameters are zero.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A named group of parameters of a forward model.
+
+    Attributes
+    ----------
+    name : effect name (e.g. ``"focal_scale"``).
+    parameters : parameter names, unique across the problem.
+    bounds : physical (lower, upper) bound of each parameter, in its SI unit.
+    steps : central-difference step of each parameter for the Jacobian.
+    description : one line for reports (parametrisation and units).
+    direction : relative size of the parameters for an injection "along the effect" (synthetic
+        data, acceptance runs); the diagnosis never uses it.
+    """
+
+    name: str
+    parameters: tuple[str, ...]
+    bounds: tuple[tuple[float, float], ...]
+    steps: tuple[float, ...]
+    description: str = ""
+    direction: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        k = len(self.parameters)
+        if len(self.bounds) != k or len(self.steps) != k:
+            raise ValueError(f"effect {self.name}: bounds and steps need one entry per parameter")
+        if self.direction is not None and len(self.direction) != k:
+            raise ValueError(f"effect {self.name}: direction needs one entry per parameter")
+
+
+Residuals = Callable[[Mapping[str, FloatArray]], FloatArray]
+"""Whitened residuals of named parameter values. Values are floats, or arrays of shape (k, 1)
+for k parameter vectors at once (result (k, n)); parameters not given are zero."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Measured data, a base model and candidate effects, as the engine sees them.
+
+    Attributes
+    ----------
+    system : name for reports (``"ground"``, ``"collimation"``).
+    base : the parameters always fitted (bounds usually infinite).
+    candidates : the library of candidate effects.
+    residuals : see :data:`Residuals`; ``n_obs`` values per parameter vector.
+    start : starting values of the base parameters.
+    unavailable : candidate name -> reason it cannot be tested with these data (e.g. no time
+        column); such candidates are reported, never tested.
+    """
+
+    system: str
+    base: Effect
+    candidates: tuple[Effect, ...]
+    residuals: Residuals
+    start: Mapping[str, float]
+    unavailable: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        names = [p for e in (self.base, *self.candidates) for p in e.parameters]
+        if len(set(names)) != len(names):
+            raise ValueError("parameter names must be unique across base and candidates")
+        effects = [e.name for e in (self.base, *self.candidates)]
+        if len(set(effects)) != len(effects):
+            raise ValueError("effect names must be unique")
+
+    def effect(self, name: str) -> Effect:
+        for e in (self.base, *self.candidates):
+            if e.name == name:
+                return e
+        raise KeyError(f"unknown effect {name!r}; known: "
+                       f"{', '.join(e.name for e in self.candidates)}")
+
+    @property
+    def parameter_effect(self) -> dict[str, Effect]:
+        return {p: e for e in (self.base, *self.candidates) for p in e.parameters}

@@ -1,0 +1,97 @@
+"""Fused reduction of per-trial metric rows into the streaming statistics of :mod:`.aggregate`.
+
+A numba loop for systems with a fast kernel (see :meth:`.aggregate.PointStats.add_block_summary`):
+count, mean, sum of squared deviations, min, max and the histogram of each metric row in one
+pass over the values, with the bins of :func:`.aggregate.bin_index`. Imported only where
+kernels run, so that numba stays out of processes that only aggregate.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from montecarlo.engine.aggregate import BIN_BASE, BIN_SHIFT, N_MAG, ZERO_BIN
+
+_EXPONENT = 0x7FF0000000000000
+_MAGNITUDE = 0x7FFFFFFFFFFFFFFF
+_INT_MAX = np.iinfo(np.int64).max
+_INT_MIN = np.iinfo(np.int64).min
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def accumulate(values, rows, hist, stats, bins):  # pragma: no cover - compiled
+    """Add per-trial metric values to streaming statistics (NaN = invalid, skipped).
+
+    values : (k, n) float64, of which ``rows`` (m,) are the metrics, in this order;
+    hist : (m, N_BINS) int64, in place; stats : (m, 5) float64 in
+    place: count, mean, m2, min, max (sub-chunks merged by Chan's formula in a fixed order);
+    bins : (n,) int32 scratch for the bin indices (as :func:`.aggregate.bin_index`).
+
+    Written for the loop vectoriser: validity is tested on the exponent bits and min/max are
+    taken on order-preserving integer keys of the bits with integer min/max (a float min/max
+    that skips NaNs is not a reduction LLVM can vectorise). The sums are reassociated
+    (vectorised): deterministic on one CPU type, and may differ in the last bits between CPU
+    types, as numpy's own SIMD dispatch does.
+    """
+    m = rows.shape[0]
+    n = values.shape[1]
+    bits = values.view(np.int64)
+    for r in range(m):
+        row = values[rows[r]]
+        brow = bits[rows[r]]
+        shift = 0.0  # a value near the data, for a one-pass sum of squared deviations
+        for i in range(n):
+            if row[i] == row[i]:
+                shift = row[i]
+                break
+        cnt = 0
+        s1 = 0.0
+        s2 = 0.0
+        kmin = _INT_MAX
+        kmax = _INT_MIN
+        for i in range(n):
+            b = brow[i]
+            valid = (b & _EXPONENT) != _EXPONENT  # finite
+            d = row[i] - shift if valid else 0.0
+            cnt += 1 if valid else 0
+            s1 += d
+            s2 += d * d
+            key = b if b >= 0 else b ^ _MAGNITUDE  # integer order = float order
+            kmin = min(kmin, key if valid else _INT_MAX)
+            kmax = max(kmax, key if valid else _INT_MIN)
+            k = ((b & _MAGNITUDE) >> BIN_SHIFT) - BIN_BASE
+            kk = min(k, N_MAG)
+            idx = ZERO_BIN if k < 0 else (ZERO_BIN - 1 - kk if b < 0 else ZERO_BIN + 1 + kk)
+            bins[i] = idx if valid else -1
+        hrow = hist[r]
+        for i in range(n):
+            if bins[i] >= 0:
+                hrow[bins[i]] += 1
+        if cnt == 0:
+            continue
+        lo = np.array([kmin if kmin >= 0 else kmin ^ _MAGNITUDE]).view(np.float64)[0]
+        hi = np.array([kmax if kmax >= 0 else kmax ^ _MAGNITUDE]).view(np.float64)[0]
+        mean = shift + s1 / cnt
+        m2 = max(s2 - s1 * s1 / cnt, 0.0)
+        n0 = stats[r, 0]
+        if n0 == 0.0:
+            stats[r, 1] = mean
+            stats[r, 2] = m2
+            stats[r, 0] = cnt
+        else:
+            tot = n0 + cnt
+            delta = mean - stats[r, 1]
+            stats[r, 1] += delta * cnt / tot
+            stats[r, 2] += m2 + delta * delta * n0 * cnt / tot
+            stats[r, 0] = tot
+        stats[r, 3] = min(stats[r, 3], lo)
+        stats[r, 4] = max(stats[r, 4], hi)
+
+
+def new_stats(m: int) -> np.ndarray:
+    """Empty accumulator rows for :func:`accumulate`."""
+    s = np.zeros((m, 5))
+    s[:, 3] = np.inf
+    s[:, 4] = -np.inf
+    return s

@@ -1,0 +1,265 @@
+"""Studies of the discrepancy workflow: simulated data sets, fitted or diagnosed, per trial.
+
+Two study systems (``discrepancy_ground``, ``discrepancy_collimation``) simulate measured-like
+data sets on a layout from a truth, fit a model or run the whole diagnosis, and score it
+(:func:`montecarlo.discrepancy.design.score_trials`). They serve the acceptance studies and the
+Monte Carlo gap of a diagnosis report (:func:`monte_carlo_gap`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy.design import TRIAL_METRICS, inject_at_mdb, score_trials
+from montecarlo.discrepancy.engine import ALPHA, Diagnosis
+from montecarlo.discrepancy.view import SystemView
+from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.engine.system import Metric
+from montecarlo.geometry.camera import Camera
+from montecarlo.io.collimation_csv import layout_from_json as mirror_layout_from_json
+from montecarlo.io.ground_csv import GroundData
+from montecarlo.io.ground_csv import layout_from_json as ground_layout_from_json
+from montecarlo.seed003.model import Noise
+from montecarlo.systems.params import ParamSystem, study_params
+from montecarlo.units import ARCSEC
+
+FloatArray = NDArray[np.float64]
+
+# --------------------------------------------------------------------------- ground
+
+GROUND_DEFAULTS: dict[str, float | int | str] = {
+    "fov_yaw": math.radians(90.0), "fov_pitch": math.radians(90.0), "n_x": 512, "n_z": 512,
+    "pixel_sigma": 0.3, "survey_sigma": 0.01, "layout": "",
+    **ge.DEFAULT_MOUNTING,
+    **dict.fromkeys(ge.TRUTH_KEYS, 0.0),
+    "c": 1.0, "k": ge.STANDARD_REFRACTION,
+    "extra_truth": "",
+    "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
+}
+"""Defaults of :func:`run_ground_trials` (SI units, radians); see its docstring."""
+
+
+def default_layout(camera: Camera, mounting: Mapping[str, float]) -> GroundData:
+    """The acceptance layout: 6 x 6 targets over 80 % of the field at 50 and 100 m, one hour."""
+    return ge.field_layout(camera, mounting, (50.0, 100.0), (6, 6), 0.8, 3600.0, 1, rng=2024)
+
+
+def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Generator,
+                      n: int) -> dict[str, FloatArray]:
+    """Monte Carlo of the ground diagnosis: simulate data sets, fit or diagnose each.
+
+    Parameters
+    ----------
+    params : mapping; missing keys take :data:`GROUND_DEFAULTS`.
+        ``fov_yaw``, ``fov_pitch`` [rad], ``n_x``, ``n_z`` [px]: camera (seed 000's 90 deg,
+        512 px). ``pixel_sigma`` [px] (0.3), ``survey_sigma`` [m] (0.01): noise.
+        ``layout`` [JSON text]: targets as :meth:`GroundData.layout`; "" for
+        :func:`default_layout` at the true mounting. ``psi``, ``theta``, ``gamma`` [rad]: true
+        mounting (30, 20, 10 deg). Every candidate parameter (``k1``, ``p1``, ``p2``, ``c_x``
+        [px], ``c_z`` [px], ``s``, ``a``, ``rho`` [rad], ``s_h``, ``b_x``, ``b_y``, ``b_z``,
+        ``l_x``, ``l_y``, ``l_z`` [m], ``k``, ``c``, ``w_psi``, ``w_theta``, ``w_gamma``
+        [rad/s]): its true value (0, except the physical ``c`` = 1 and ``k`` = 0.13).
+        ``extra_truth`` [JSON text]: further true parameters, e.g. session shifts [rad].
+        ``fit_effects`` [text]: comma-separated effects fitted for ``chi2`` .. ``rms`` ("":
+        the base model). ``diagnose`` [0/1]: also run the whole DIA diagnosis. ``expected``
+        [text]: the effect injected, for scoring. ``inject_mdb`` [1]: if > 0, ``expected`` is
+        injected at this multiple of its design MDB along its default direction (replacing its
+        values above). ``alpha`` [1]: significance (0.01).
+    rng : numpy Generator, the only source of randomness.
+    n : number of simulated data sets.
+
+    Returns
+    -------
+    dict of metric -> ndarray (n,), float64 (NaN where not applicable):
+        ``chi2``, ``chi2_red``, ``p_value`` [1], ``rms`` [px]: residual statistic of the
+        ``fit_effects`` model (rms over both coordinates of all observations).
+        With ``diagnose``: ``detected``, ``named_any`` [0/1]; ``n_named`` [count];
+        ``named_expected`` [0/1] (the expected effect named), ``named_expected_or_group``
+        [0/1] (named or in a named effect's confounded group); ``named_watched`` [0/1]
+        (refraction or earth_curvature named); ``expected_within_2sigma`` [1] (fraction of
+        its parameters within 2 sigma of the truth, when it is named);
+        ``expected_all_within_2sigma`` [0/1]; ``chi2_red_after`` [1] and
+        ``chi2_red_after_in_band`` [0/1] (inside the central 99 % band of chi2(dof)/dof).
+    """
+    unknown = set(params) - set(GROUND_DEFAULTS)
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
+    p = {**GROUND_DEFAULTS, **params}
+    camera = Camera(float(p["fov_yaw"]), float(p["fov_pitch"]), float(p["n_x"]),
+                    float(p["n_z"]))
+    truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", *ge.TRUTH_KEYS)}
+    if p["extra_truth"]:
+        truth.update({k: float(v) for k, v in json.loads(str(p["extra_truth"])).items()})
+    layout = (default_layout(camera, truth) if not p["layout"]
+              else ground_layout_from_json(str(p["layout"])))
+    sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
+    alpha = float(p["alpha"])
+    expected = str(p["expected"])
+    effects = tuple(e for e in str(p["fit_effects"]).split(",") if e.strip())
+    effects = tuple(e.strip() for e in effects)
+    if float(p["inject_mdb"]) > 0:
+        if not expected:
+            raise ValueError("inject_mdb needs an expected effect")
+        truth = inject_at_mdb(
+            lambda tr: ge.exact_problem(layout, camera, tr, sigma, survey), truth, expected,
+            float(p["inject_mdb"]), alpha)
+    return score_trials(
+        lambda g: ge.simulate(layout, camera, truth, sigma, survey, g),
+        lambda data: ge.ground_problem(data, camera, sigma, survey),
+        lambda data, fit: float(np.sqrt(np.mean(ge.raw_residuals(data, camera, fit.params) ** 2))),
+        truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
+        watched=("refraction", "earth_curvature"))
+
+
+GROUND = ParamSystem(
+    name="discrepancy_ground",
+    run_trials=run_ground_trials,
+    defaults=GROUND_DEFAULTS,
+    units={"fov_yaw": "deg", "fov_pitch": "deg", "pixel_sigma": "px", "survey_sigma": "m",
+           "psi": "deg", "theta": "deg", "gamma": "deg", "c_x": "px", "c_z": "px",
+           "rho": "mrad", "b_x": "m", "b_y": "m", "b_z": "m", "l_x": "m", "l_y": "m",
+           "l_z": "m"},
+    metrics_=(
+        Metric("chi2", "χ² of the fitted model", "1", 1.0),
+        Metric("chi2_red", "reduced χ² of the fitted model", "1", 1.0),
+        Metric("p_value", "global test p-value", "1", 1.0),
+        Metric("rms", "residual RMS", "px", 1.0),
+        *(Metric(m, m.replace("_", " "), "1", 1.0) for m in TRIAL_METRICS[4:]),
+    ),
+    default_block_size=32,
+)
+"""Study system ``discrepancy_ground``: residual statistics and DIA rates."""
+
+
+# --------------------------------------------------------------------------- collimation
+
+COLLIMATION_DEFAULTS: dict[str, float | int | str] = {
+    "n_azimuth": 7, "n_pitch": 7, "azimuth_span": math.radians(90.0),
+    "pitch_span": math.radians(60.0), "layout": "",
+    "theodolite_sigma": 2.0 * ARCSEC, "ins_sigma": 2.0 * ARCSEC, "mount_roll_sigma": 0.0,
+    "frame_heading": math.radians(30.0),
+    **dict.fromkeys(ce.TRUTH_KEYS, 0.0),
+    "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
+}
+"""Defaults of :func:`run_collimation_trials` (SI units, radians); see its docstring."""
+
+
+
+def run_collimation_trials(params: Mapping[str, float | int | str],
+                           rng: np.random.Generator, n: int) -> dict[str, FloatArray]:
+    """Monte Carlo of the collimation diagnosis: simulate calibrations, fit or diagnose each.
+
+    Parameters
+    ----------
+    params : mapping; missing keys take :data:`COLLIMATION_DEFAULTS`.
+        ``n_azimuth``, ``n_pitch`` [count] (7, 7), ``azimuth_span``, ``pitch_span`` [rad]
+        (90, 60 deg): seed 003's fixture, or ``layout`` [JSON text] as
+        :meth:`MirrorData.layout` ("" for the fixture). ``theodolite_sigma`` [rad] (2
+        arc-seconds): each theodolite reading; ``ins_sigma`` [rad] (2 arc-seconds): each INS
+        heading, pitch and roll reading; ``mount_roll_sigma`` [rad] (0): true roll spread
+        (reported when > 0). The diagnosis is told ``hypot(theodolite_sigma, ins_sigma)`` per
+        heading and pitch residual. ``frame_heading`` [rad] (30 deg) and every candidate
+        parameter (``axis_az``, ``axis_el``, ``frame_tilt_x``, ``frame_tilt_y``,
+        ``ins_heading_bias``, ``ins_pitch_bias``, ``theodolite_c`` [rad];
+        ``ins_heading_scale``, ``ins_pitch_scale`` [1]): true values (0).
+        ``fit_effects``, ``diagnose``, ``expected``, ``inject_mdb``, ``alpha``: as in
+        :func:`run_ground_trials`.
+    rng : numpy Generator, the only source of randomness.
+    n : number of simulated calibrations.
+
+    Returns
+    -------
+    dict of metric -> ndarray (n,), float64: :data:`montecarlo.discrepancy.design.TRIAL_METRICS`
+    (``rms`` [rad] of heading and pitch residuals; ``named_watched`` counts
+    ``theodolite_collimation`` named).
+    """
+    unknown = set(params) - set(COLLIMATION_DEFAULTS)
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
+    p = {**COLLIMATION_DEFAULTS, **params}
+    layout = (ce.paper_mirrors(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
+                            float(p["pitch_span"]))
+              if not p["layout"] else mirror_layout_from_json(str(p["layout"])))
+    ins = float(p["ins_sigma"])
+    noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
+    sigma = math.hypot(noise.theodolite, ins)
+    truth = {k: float(p[k]) for k in ("frame_heading", *ce.TRUTH_KEYS)}
+    alpha = float(p["alpha"])
+    expected = str(p["expected"])
+    effects = tuple(e.strip() for e in str(p["fit_effects"]).split(",") if e.strip())
+    if float(p["inject_mdb"]) > 0:
+        if not expected:
+            raise ValueError("inject_mdb needs an expected effect")
+        truth = inject_at_mdb(lambda tr: ce.exact_problem(layout, tr, sigma), truth, expected,
+                                  float(p["inject_mdb"]), alpha)
+    return score_trials(
+        lambda g: ce.simulate(layout, truth, noise, g),
+        lambda data: ce.collimation_problem(data, sigma),
+        lambda data, fit: float(np.sqrt(np.mean(ce.raw_residuals(data, fit.params) ** 2))),
+        truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
+        watched=("theodolite_collimation",))
+
+
+COLLIMATION = ParamSystem(
+    name="discrepancy_collimation",
+    run_trials=run_collimation_trials,
+    defaults=COLLIMATION_DEFAULTS,
+    units={"azimuth_span": "deg", "pitch_span": "deg", "theodolite_sigma": "arcsec",
+           "ins_sigma": "arcsec", "mount_roll_sigma": "deg", "frame_heading": "deg",
+           "axis_az": "arcsec", "axis_el": "arcsec", "frame_tilt_x": "arcsec",
+           "frame_tilt_y": "arcsec", "ins_heading_bias": "arcsec", "ins_pitch_bias": "arcsec",
+           "theodolite_c": "arcsec"},
+    metrics_=(
+        Metric("chi2", "χ² of the fitted model", "1", 1.0),
+        Metric("chi2_red", "reduced χ² of the fitted model", "1", 1.0),
+        Metric("p_value", "global test p-value", "1", 1.0),
+        Metric("rms", "residual RMS", "arcsec", 1.0 / ARCSEC),
+        *(Metric(m, m.replace("_", " "), "1", 1.0) for m in TRIAL_METRICS[4:]),
+    ),
+    default_block_size=32,
+)
+"""Study system ``discrepancy_collimation``: residual statistics and DIA rates."""
+
+
+# --------------------------------------------------------------------------- Monte Carlo gap
+
+
+def monte_carlo_gap(d: Diagnosis, view: SystemView, trials: int = 200, seed: int = 0,
+                    n_jobs: int = 1) -> dict[str, FloatArray]:
+    """Simulated chi2_red of the model before and after, through the study runner.
+
+    Returns ``{"before": (trials,), "after": (trials,)}``: each data set is simulated on the
+    measured layout from that model's fitted values and refitted with the same model.
+    """
+    from montecarlo.systems import study_from_dict
+
+    system = {s.name: s for s in (GROUND, COLLIMATION)}[view.study_system]
+    before = study_params(system, view.study_params(d.before))
+    after = study_params(system, view.study_params(d.after))
+    keys = sorted(set(before) | set(after))
+    common = {k: before[k] for k in keys if before.get(k) == after.get(k)}
+    sweep = {f"params.{k}": [before[k], after[k]] for k in keys if k not in common}
+    raw: dict[str, Any] = {
+        "study": {"name": f"diagnose_{view.system}", "system": system.name,
+                  "trials": trials, "seed": seed, "per_trial": True},
+        "params": common,
+    }
+    if sweep:
+        raw["sweep"] = {"mode": "zip", **sweep}
+    study = study_from_dict(raw, f"<diagnose {view.system}>")
+    with tempfile.TemporaryDirectory() as tmp:
+        result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False,
+                                             checkpoint_dir=Path(tmp)))
+    column = "default/chi2_red"
+    values = [result.trials[p.index][column].to_numpy(float) for p in study.points]
+    return {"before": values[0], "after": values[-1]}
