@@ -4,11 +4,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from montecarlo import units
 from montecarlo.errors import InputError
 from montecarlo.geometry import metrics
 from montecarlo.geometry.rotations import mounting_matrix
 from montecarlo.seed000 import air
-from montecarlo.seed000 import transfer_alignment as ta
+from montecarlo.seed000 import table2 as t2
+from montecarlo.systems.air import AIR
+from montecarlo.units import ARCMIN, MRAD
 
 rng = np.random.default_rng(19)
 ANGLES = tuple(np.radians([30.0, 20.0, 10.0]))
@@ -99,7 +102,7 @@ def test_level_split_readings():
 def test_paper_arithmetic_is_the_rss_of_the_inputs():
     """Seed 000, section 2: 1.70 mrad (two decimals) = sqrt(3² + 5²)′; 5.10 = 3 x 1.70 (rounded
     first: 3 x 1.6962 = 5.089 would print as 5.09)."""
-    rss = air.rss_of_inputs() / air.MRAD
+    rss = air.rss_of_inputs() / MRAD
     assert round(rss, 2) == 1.70
     assert round(3 * round(rss, 2), 2) == 5.10
     assert round(3 * rss, 2) == 5.09
@@ -133,7 +136,7 @@ def test_rms_rotation_angle_matches_the_sum_of_variances():
 
 
 def test_reproduction_of_1_70_and_5_10_mrad():
-    """Acceptance (issue 8): 1.70 mrad (1σ) and 5.10 mrad (3σ) within 2 %.
+    """Acceptance of the air calibration: 1.70 mrad (1σ) and 5.10 mrad (3σ) within 2 %.
 
     They are reproduced by the rms of the true rotation angle phi (and 3 x rms), level 5′ read
     as the RSS of the two level axes. Tolerance: 2 % (the issue), the standard error of the rms
@@ -154,7 +157,7 @@ def test_reproduction_of_1_70_and_5_10_mrad():
 
 def test_run_trials_contract():
     out = air.run_trials({}, np.random.default_rng(7), 64)
-    assert set(out) == set(air.METRIC_UNITS)
+    assert set(out) == {m.name for m in AIR.metrics_}
     for v in out.values():
         assert v.shape == (64,) and v.dtype == np.float64 and np.isfinite(v).all()
     again = air.run_trials({}, np.random.default_rng(7), 64)
@@ -164,10 +167,10 @@ def test_run_trials_contract():
 
 
 def test_table2_source_equals_the_sigmas_of_its_row():
-    row = ta.TABLE2_ROWS[0]
+    row = t2.TABLE2_ROWS[0]
     a = air.run_trials({"ta_source": "table2", "gyro_drift": row.gyro_drift,
                         "accel_bias": row.accel_bias}, np.random.default_rng(8), 50)
-    b = air.run_trials({"heading_sigma": 13 * air.ARCMIN, "level_sigma": 20 * air.ARCMIN},
+    b = air.run_trials({"heading_sigma": 13 * ARCMIN, "level_sigma": 20 * ARCMIN},
                        np.random.default_rng(8), 50)
     np.testing.assert_allclose(a["rotation_angle"], b["rotation_angle"], rtol=1e-12)
 
@@ -176,8 +179,8 @@ def test_kalman_source_draws_from_the_filter_covariance():
     """Heading error rms of the draws against the filter's sigma_U (chi-square 99.9 %)."""
     from scipy import stats
     n = 2000
-    params = {"ta_source": "kalman", "gyro_drift": 0.05 * ta.DEG_PER_HOUR,
-              "accel_bias": 5e-4 * ta.G0}
+    params = {"ta_source": "kalman", "gyro_drift": 0.05 * units.DEG_PER_HOUR,
+              "accel_bias": 5e-4 * units.G0}
     out = air.run_trials(params, np.random.default_rng(9), n)
     P = air.transfer_alignment_covariance({**air.DEFAULT_PARAMS, **params})
     ratio = np.mean(out["heading_error"] ** 2) / P[2, 2]

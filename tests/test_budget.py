@@ -9,12 +9,13 @@ import pytest
 from scipy import stats
 
 from montecarlo.design import budget as bg
-from montecarlo.design import sizing as sz
+from montecarlo.design import budget_report
+from montecarlo.design import sizing_problem as sp
 from montecarlo.errors import InputError
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
 
-REQ = sz.Requirement(limit=3.0)
+REQ = sp.Requirement(limit=3.0)
 
 
 def linear_problem():
@@ -73,7 +74,7 @@ def test_allocation_is_rss_consistent_and_proportional_to_total_order():
 
 
 def prepared(relation="common", **errors):
-    raw = {**sz.DEFAULT_DESIGN, "errors": {**sz.DEFAULT_DESIGN["errors"], **errors,
+    raw = {**sp.DEFAULT_DESIGN, "errors": {**sp.DEFAULT_DESIGN["errors"], **errors,
                                            "pixel_relation": relation}}
     return study_from_dict(raw).points[0].prepared
 
@@ -110,7 +111,7 @@ def test_budget_model_is_the_ground_simulation():
     ({"mounting": {"psi_deg": {"dist": "uniform", "bound": 5.0}}}, "fixed true mounting"),
 ])
 def test_budget_refuses_sources_without_a_variance(change, message):
-    raw = {**sz.DEFAULT_DESIGN}
+    raw = {**sp.DEFAULT_DESIGN}
     for section, values in change.items():
         raw[section] = {**raw[section], **values}
     with pytest.raises(InputError, match=message):
@@ -123,17 +124,17 @@ def test_a_lone_source_scales_linearly():
     bound departs from 2 only by second-order terms (relative size ~ the angle, 1e-3) and the
     histogram quantisation of each percentile (2**-11 relative each); 1 % bounds both, and a
     square law (4) or no dependence (1) would fail."""
-    base = {**sz.DEFAULT_DESIGN, "errors": {**sz.DEFAULT_DESIGN["errors"], "dy_m": 0.0,
+    base = {**sp.DEFAULT_DESIGN, "errors": {**sp.DEFAULT_DESIGN["errors"], "dy_m": 0.0,
                                             "dh1_m": 0.0, "dh_m": 0.0, "pixel_px": 0.0}}
     rows = [{"errors.dx_m": {"dist": "uniform", "bound": b}} for b in (0.1, 0.2)]
-    study = sz.ground_study(base, REQ, rows, "common", trials=4000, seed=3, block_size=2000)
-    stats_ = sz.run_statistic(study, REQ, n_jobs=1)
+    study = sp.ground_study(base, REQ, rows, "common", trials=4000, seed=3, block_size=2000)
+    stats_ = sp.run_statistic(study, REQ, n_jobs=1)
     assert stats_["value"][1] / stats_["value"][0] == pytest.approx(2.0, rel=0.01)
 
 
 @pytest.fixture(scope="module")
 def small_budget():
-    return bg.budget(sz.DEFAULT_DESIGN, REQ, "common", samples=1024, seed=4, trials=4000,
+    return bg.budget(sp.DEFAULT_DESIGN, REQ, "common", samples=1024, seed=4, trials=4000,
                      n_jobs=1)
 
 
@@ -156,7 +157,7 @@ def test_sobol_ranking_agrees_with_the_sources_alone(small_budget):
 
 
 def test_budget_outputs(small_budget, tmp_path):
-    files = bg.write_budget([small_budget], tmp_path)
+    files = budget_report.write_budget([small_budget], tmp_path)
     assert {f.name for f in files} == {"budget-common.csv", "budget.png", "report.md"}
     assert (tmp_path / "budget.png").stat().st_size < 200_000
     report = (tmp_path / "report.md").read_text()

@@ -1,4 +1,4 @@
-"""Issue 6 acceptance, measured by Monte Carlo (slow: about 20 s).
+"""Acceptance of the seed 003 fit, measured by Monte Carlo (slow: about 20 s).
 
 Paper-like layout (:func:`paper_layout`, 5 + 5 mirrors), theodolite 2″, INS 2″, offsets 0.05°.
 """
@@ -23,11 +23,11 @@ def test_offsets_within_2_sigma_and_residuals_match_noise():
         print(f"{k}: within 2 sigma in {fraction:.3f} of {n} trials, MC std "
               f"{np.std(out[f'{k}_error']) / ARCSEC:.2f}″, predicted "
               f"{np.mean(out[f'{k}_sigma']) / ARCSEC:.2f}″")
-        assert fraction >= 0.90  # issue 6 acceptance
+        assert fraction >= 0.90  # acceptance
     ratio = np.mean(out["residual_rms_ratio"])
     print(f"mean residual RMS after / injected noise = {ratio:.3f}; expected sqrt(17/20) = "
           f"{math.sqrt(17 / 20):.3f} (3 of 20 degrees of freedom fitted)")
-    assert abs(ratio - 1) <= 0.2  # issue 6 acceptance
+    assert abs(ratio - 1) <= 0.2  # acceptance
     assert abs(math.sqrt(np.mean(out["chi2_red"])) - 1) <= 3 * math.sqrt(1 / (2 * 17 * n))
 
 

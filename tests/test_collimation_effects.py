@@ -1,4 +1,4 @@
-"""Collimation forward model with candidate effects (issue 5) and what the data can tell."""
+"""Collimation forward model with candidate effects and what the data can tell."""
 
 import math
 
@@ -22,7 +22,7 @@ AS = ARCSEC
 
 
 def test_reduces_to_seed003_model():
-    """Only the parameters of montecarlo.collimation: its predict_readings, unchanged."""
+    """Only the parameters of montecarlo.seed003.model: its predict_readings, unchanged."""
     params = {"frame_heading": 0.5, "axis_az": 100 * AS, "axis_el": -50 * AS,
               "frame_tilt_x": 20 * AS, "frame_tilt_y": -10 * AS}
     roll = np.linspace(-0.01, 0.01, LAYOUT.theodolite_az.size)

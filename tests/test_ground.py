@@ -50,7 +50,7 @@ def test_forward_model_flags_target_behind():
 
 
 def test_zero_error_round_trip_100k_cases():
-    """Acceptance (issue 2): no error in, true angles out to <= 1e-9 rad, over >= 100,000 cases.
+    """The literal solver: no error in, true angles out to <= 1e-9 rad, over >= 100,000 cases.
 
     Mounting angles within +-80 deg, L 10-1000 m, H 0.5-10 m, fields of view 10-170 deg and
     64-4096 pixels, all drawn per case. Cases whose targets fall outside the field of view or

@@ -1,4 +1,4 @@
-"""Ground forward model with candidate effects (issue 5), checked against independent routes."""
+"""Ground forward model with candidate effects, checked against independent routes."""
 
 import math
 
@@ -37,7 +37,7 @@ def moved(layout, positions):
 
 
 def test_base_model_equals_seed000_trigonometric_route():
-    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (montecarlo.ground)."""
+    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (seed000.ground)."""
     C = Rotation.from_euler("ZXY", [MOUNT["psi"], MOUNT["theta"], MOUNT["gamma"]]).as_matrix().T
     expected, flags = ground.observe_target(C, LAYOUT.positions, CAM)
     assert not flags.any()

@@ -1,4 +1,4 @@
-"""The fused ground kernel equals the literal reference (montecarlo.ground) to 1e-12 rad."""
+"""The fused ground kernel equals the literal reference (montecarlo.seed000.ground) to 1e-12 rad."""
 
 import textwrap
 

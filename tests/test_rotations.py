@@ -22,7 +22,7 @@ def _angles(limit_yaw_roll=np.pi, limit_pitch=np.pi / 2 * 0.999):
 
 
 def test_eq5_is_scipy_intrinsic_zxy_transposed():
-    """NOTES.md: C_b^a = Rotation.from_euler('ZXY', [psi, theta, gamma]).as_matrix().T."""
+    """C_b^a = Rotation.from_euler('ZXY', [psi, theta, gamma]).as_matrix().T (conventions.md)."""
     psi, theta, gamma = _angles()
     ours = mounting_matrix(psi, theta, gamma)
     ref = Rotation.from_euler("ZXY", np.stack([psi, theta, gamma], -1)).as_matrix()

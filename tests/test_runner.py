@@ -113,7 +113,7 @@ def test_common_random_numbers_make_trends_smooth(tmp_path):
 
 def test_table1_study_reproduces_table1_module(tmp_path):
     """The worst_case points of studies/table1.toml (fast kernel) give the maxima of the literal
-    montecarlo.table1 to 1e-12 rad (1e-9 mrad)."""
+    montecarlo.seed000.table1 to 1e-12 rad (1e-9 mrad)."""
     study = load_study(ROOT / "studies/table1.toml", trials=500)
     df = _summary(study, tmp_path, n_jobs=2)
     worst = df[(df["errors.evaluation"] == "worst_case") & (df["metric"] == "table1_angle")]

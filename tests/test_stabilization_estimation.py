@@ -191,7 +191,7 @@ def test_small_monte_carlo():
 
 @pytest.mark.slow
 def test_acceptance_monte_carlo():
-    """Issue 7 acceptance: misalignments 0.2-1 deg, 0.1 px image noise, 60 s of rocking.
+    """Acceptance (docs/stabilization.md): misalignments 0.2-1 deg, 0.1 px image noise, 60 s.
 
     300 trials at the defaults of run_trials (about 2 min). Each combination within 2 sigma
     and within 5 % in at least 90 % of the trials. LOS stabilisation error RMS after

@@ -14,10 +14,10 @@ def table():
 
 def test_table1_within_one_percent_of_paper(table):
     """Seed 000 (Ding Tao 2014), section 1.4, Table 1: the twelve printed values (Delta and
-    normalised Delta, mrad, two decimals) are reproduced within 1 % (acceptance of issue 2).
+    normalised Delta, mrad, two decimals) are reproduced within 1 %.
 
     The recipe (worst case over 2^6 corners, common pixel error, metric arccos((1 + tr D)/4))
-    is the one NOTES.md established; the printed values are used only here, as the reference.
+    is the one docs/conventions.md records; the printed values are used only here, as the reference.
     """
     rel = table1.relative_differences(table)
     assert rel.abs().to_numpy().max() < 0.01, rel
@@ -34,7 +34,7 @@ def test_table1_stored_values(table):
 
 
 def test_table1_metric_relations(table):
-    """The Table 1 metric is about phi/sqrt(2) of the true rotation angle phi (NOTES.md)."""
+    """The Table 1 metric is about phi/sqrt(2) of the true rotation angle phi (conventions.md)."""
     np.testing.assert_allclose(table["delta_mrad"] * np.sqrt(2), table["phi_mrad"], rtol=1e-4)
 
 

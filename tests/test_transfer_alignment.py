@@ -5,6 +5,8 @@ import pytest
 from scipy import stats
 from scipy.spatial.transform import Rotation
 
+from montecarlo import units
+from montecarlo.seed000 import table2 as t2
 from montecarlo.seed000 import transfer_alignment as ta
 
 
@@ -19,9 +21,9 @@ def test_table2_as_printed():
     printed = [(0.05, 5e-4, 13, 20), (0.05, 1e-4, 8, 12), (0.05, 5e-5, 3, 5),
                (0.50, 5e-5, 3, 5), (1.00, 5e-5, 3, 5)]
     assert [(r.gyro_deg_h, r.accel_g, r.heading_arcmin, r.level_arcmin)
-            for r in ta.TABLE2_ROWS] == printed
-    assert ta.TABLE2_ROWS[4].gyro_drift == pytest.approx(np.radians(1.0) / 3600, rel=1e-12)
-    assert ta.TABLE2_ROWS[0].accel_bias == pytest.approx(5e-4 * 9.80665, rel=1e-12)
+            for r in t2.TABLE2_ROWS] == printed
+    assert t2.TABLE2_ROWS[4].gyro_drift == pytest.approx(np.radians(1.0) / 3600, rel=1e-12)
+    assert t2.TABLE2_ROWS[0].accel_bias == pytest.approx(5e-4 * 9.80665, rel=1e-12)
 
 
 def test_s_turn_is_a_coordinated_turn():
@@ -32,7 +34,7 @@ def test_s_turn_is_a_coordinated_turn():
     # finite-difference specific force: relative error O((w dt)^2) ~ 1e-7
     assert np.abs(f_b[:, :2]).max() < 1e-5 * np.linalg.norm(f_b, axis=-1).min()
     horizontal = np.linalg.norm(truth.f_n[:, :2], axis=-1)
-    bank = np.arctan(horizontal.max() / ta.G0)
+    bank = np.arctan(horizontal.max() / units.G0)
     assert bank == pytest.approx(cfg.bank, rel=1e-5)
     # heading swings back: the S-turn returns to its initial heading after one period
     C0, v = ta.aircraft_motion(cfg, np.array([0.0, cfg.period]))
@@ -41,7 +43,7 @@ def test_s_turn_is_a_coordinated_turn():
 
 
 def test_aircraft_attitude_matches_scipy_zxy():
-    """C_{b_f}^g = Rotation.from_euler('ZXY', [psi, theta, gamma]) (active), NOTES.md."""
+    """C_{b_f}^g = Rotation.from_euler('ZXY', [psi, theta, gamma]) (active), docs/conventions.md."""
     cfg = ta.AlignmentConfig(manoeuvre="wing_rock", bank=0.3, period=8.0)
     t = np.array([1.0, 2.5])
     C_bn, _ = ta.aircraft_motion(cfg, t)
@@ -153,9 +155,9 @@ def test_level_tilt_and_horizontal_bias_inseparable_without_manoeuvre():
 
     Finite velocity noise adds (sigma_v / (g T))^2 at most, 0.4 % of the variance here.
     """
-    cfg = ta.AlignmentConfig(manoeuvre="level", accel_bias=5e-4 * ta.G0)
+    cfg = ta.AlignmentConfig(manoeuvre="level", accel_bias=5e-4 * units.G0)
     sigma = np.sqrt(np.diag(ta.final_attitude_covariance(cfg)))
-    limit = 1.0 / np.sqrt(1.0 / cfg.initial_level**2 + ta.G0**2 / cfg.accel_bias**2)
+    limit = 1.0 / np.sqrt(1.0 / cfg.initial_level**2 + units.G0**2 / cfg.accel_bias**2)
     np.testing.assert_allclose(sigma[:2], limit, rtol=0.01)
     # and the heading has learned nothing: its sigma only grew (drift, angle random walk)
     assert sigma[2] >= cfg.initial_heading
@@ -174,8 +176,8 @@ def test_table2_trend_level_is_driven_by_the_accelerometer():
     with a 20-fold gyro drift (rows 3 -> 5).
     """
     level = []
-    for row in ta.TABLE2_ROWS:
-        P = ta.final_attitude_covariance(ta.grade_config(row.gyro_drift, row.accel_bias))
+    for row in t2.TABLE2_ROWS:
+        P = ta.final_attitude_covariance(t2.grade_config(row.gyro_drift, row.accel_bias))
         level.append(np.sqrt(P[0, 0] + P[1, 1]))
     assert level[2] < level[1] < level[0]
     assert level[0] / level[2] > 2.0
@@ -200,9 +202,9 @@ def test_default_table2_grid_regression():
     """Stored values (docs/air.md, Table 2 comparison): filter 1σ heading and level RSS [′],
     default configuration, to the two decimals printed there."""
     heading, level = [], []
-    for row in ta.TABLE2_ROWS:
-        P = ta.final_attitude_covariance(ta.grade_config(row.gyro_drift, row.accel_bias))
-        heading.append(round(np.sqrt(P[2, 2]) / ta.ARCMIN, 2))
-        level.append(round(np.sqrt(P[0, 0] + P[1, 1]) / ta.ARCMIN, 2))
+    for row in t2.TABLE2_ROWS:
+        P = ta.final_attitude_covariance(t2.grade_config(row.gyro_drift, row.accel_bias))
+        heading.append(round(np.sqrt(P[2, 2]) / units.ARCMIN, 2))
+        level.append(round(np.sqrt(P[0, 0] + P[1, 1]) / units.ARCMIN, 2))
     assert heading == [0.20, 0.20, 0.20, 0.31, 0.34]
     assert level == [0.57, 0.37, 0.23, 0.25, 0.25]

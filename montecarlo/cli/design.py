@@ -20,10 +20,10 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     """The base ground design (--study or the built-in one) and its [spec] table, if any."""
     import tomllib
 
-    from montecarlo.design import sizing
+    from montecarlo.design import sizing_problem
 
     if args.study is None:
-        return sizing.DEFAULT_DESIGN, None
+        return sizing_problem.DEFAULT_DESIGN, None
     try:
         raw = tomllib.loads(Path(args.study).read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -34,7 +34,7 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
 
 
 def _requirement(args: argparse.Namespace, spec: dict | None):
-    from montecarlo.design.sizing import Requirement
+    from montecarlo.design.sizing_problem import Requirement
 
     spec = spec or {}
     limit = args.limit if args.limit is not None else spec.get("limit")
@@ -48,8 +48,7 @@ def _requirement(args: argparse.Namespace, spec: dict | None):
 
 
 def _cmd_size(args: argparse.Namespace) -> int:
-
-    from montecarlo.design import sizing
+    from montecarlo.design import sizing, sizing_problem, sizing_report
 
     base, spec = _design_base(args)
     weights = {n: float_of("--weight", n, v) for n, v in args.weight}
@@ -60,36 +59,36 @@ def _cmd_size(args: argparse.Namespace) -> int:
             bounds[name] = (float_of("--vary", name, lo),
                             float_of("--vary", name, hi if sep else lo))
     else:
-        bounds = dict(sizing.DEFAULT_BOUNDS)
+        bounds = dict(sizing_problem.DEFAULT_BOUNDS)
     unknown = set(weights) - set(bounds)
     if unknown:
         raise InputError(f"--weight: {', '.join(sorted(unknown))} is not a varied knob")
-    knobs = tuple(sizing.Knob(n, lo, hi, weights.get(n, 1.0)) for n, (lo, hi) in bounds.items())
-    problem = sizing.SizingProblem(base, _requirement(args, spec), knobs)
+    knobs = tuple(sizing_problem.Knob(n, lo, hi, weights.get(n, 1.0))
+                  for n, (lo, hi) in bounds.items())
+    problem = sizing_problem.SizingProblem(base, _requirement(args, spec), knobs)
     order = tuple(k.strip() for k in args.order.split(",")) if args.order else None
-    options = sizing.SizingOptions(levels=args.levels, trials=args.trials, seed=args.seed,
-                                   tolerance=args.tolerance,
-                                   replication_margin=not args.no_margin, order=order,
-                                   n_jobs=args.n_jobs)
+    options = sizing_problem.SizingOptions(
+        levels=args.levels, trials=args.trials, seed=args.seed, tolerance=args.tolerance,
+        replication_margin=not args.no_margin, order=order, n_jobs=args.n_jobs)
     confirm_seed = None if args.no_confirm else (
         args.confirm_seed if args.confirm_seed is not None else args.seed + 1)
     result = sizing.size(problem, options, relations=args.relations, confirm_seed=confirm_seed)
     out = Path(args.out)
-    sizing.write_outputs(result, out)
-    print(sizing.format_result(result))
+    sizing_report.write_outputs(result, out)
+    print(sizing_report.format_result(result))
     print(f"\nwritten to {out}/ (report.md, frontier.png, answers.csv, grid-*.csv, corners-*.csv)")
     return 0
 
 
 def _cmd_budget(args: argparse.Namespace) -> int:
-
-    from montecarlo.design import budget, sizing
+    from montecarlo.design import budget, budget_report
+    from montecarlo.design.sizing_problem import KNOBS
 
     base, spec = _design_base(args)
     point = {n: float_of("--point", n, v) for n, v in args.point}
     for n in point:
-        if n not in sizing.KNOBS:
-            raise InputError(f"--point {n}: unknown knob; choose from {', '.join(sizing.KNOBS)}")
+        if n not in KNOBS:
+            raise InputError(f"--point {n}: unknown knob; choose from {', '.join(KNOBS)}")
     if args.from_sizing and point:
         raise InputError("--from-sizing: give either --point or --from-sizing, not both")
     points = _sizing_answers(args.from_sizing, args.relations) if args.from_sizing \
@@ -99,9 +98,9 @@ def _cmd_budget(args: argparse.Namespace) -> int:
                              trials=args.trials, resamples=args.resamples, n_jobs=args.n_jobs)
                for rel, pt in points.items()]
     out = Path(args.out)
-    budget.write_budget(results, out)
+    budget_report.write_budget(results, out)
     for r in results:
-        print(budget.format_budget(r))
+        print(budget_report.format_budget(r))
         print()
     print(f"written to {out}/ (report.md, budget.png, budget-*.csv)")
     return 0
@@ -109,7 +108,7 @@ def _cmd_budget(args: argparse.Namespace) -> int:
 
 def _sizing_answers(path: str, relations: Sequence[str]) -> dict[str, dict[str, float]]:
     """Each relation's answer (knob -> value) from a sizing run's answers.csv."""
-    from montecarlo.design.sizing import KNOBS, RELATIONS
+    from montecarlo.design.sizing_problem import KNOBS, RELATIONS
     from montecarlo.io.table import read_table
 
     table = read_table(path, (), text=("pixel_relation",), choices={"pixel_relation": RELATIONS})

@@ -10,6 +10,7 @@ from montecarlo.cli.common import (
     positive_int,
 )
 from montecarlo.errors import InputError
+from montecarlo.units import MRAD
 
 
 def _cmd_table1(args: argparse.Namespace) -> int:
@@ -30,11 +31,11 @@ def _cmd_air(args: argparse.Namespace) -> int:
     table = air.reproduce_paper(n=args.trials, rng=args.seed)
     if args.json:
         out = {
-            "paper_mrad": {"one_sigma": air.PAPER_1SIGMA / air.MRAD,
-                           "three_sigma": air.PAPER_3SIGMA / air.MRAD},
-            "rss_of_inputs_mrad": air.rss_of_inputs() / air.MRAD,
+            "paper_mrad": {"one_sigma": air.PAPER_1SIGMA / MRAD,
+                           "three_sigma": air.PAPER_3SIGMA / MRAD},
+            "rss_of_inputs_mrad": air.rss_of_inputs() / MRAD,
             "one_d_from_1sigma_inputs_mrad": {
-                k: v / air.MRAD for k, v in air.one_sigma_rotation(1).items()},
+                k: v / MRAD for k, v in air.one_sigma_rotation(1).items()},
             "consistent_readings": air.consistent_readings(table).to_dict(orient="records"),
             "seed": args.seed,
             "rows": table.to_dict(orient="records"),
@@ -61,6 +62,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
+    from montecarlo.seed000 import table2
     from montecarlo.seed000 import transfer_alignment as ta
 
     try:
@@ -69,12 +71,12 @@ def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
                                  attitude_matching=args.attitude_matching)
     except ValueError as exc:
         raise InputError(f"montecarlo transfer-alignment: {exc}") from None
-    table = ta.table2_grid(cfg, rng=args.seed, runs=args.runs)
+    table = table2.table2_grid(cfg, rng=args.seed, runs=args.runs)
     if args.json:
-        print(json.dumps({"config": ta.describe(cfg), "seed": args.seed,
+        print(json.dumps({"config": table2.describe(cfg), "seed": args.seed,
                           "rows": table.to_dict(orient="records")}, indent=2))
     else:
-        print(ta.format_table2(table, cfg))
+        print(table2.format_table2(table, cfg))
     return 0
 
 

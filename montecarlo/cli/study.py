@@ -14,7 +14,8 @@ from montecarlo.cli.common import (
 
 def _cmd_run(args: argparse.Namespace) -> int:
 
-    from montecarlo.engine.runner import Checkpoints, RunOptions, run_study
+    from montecarlo.engine.checkpoints import Checkpoints
+    from montecarlo.engine.runner import RunOptions, run_study
     from montecarlo.systems import load_study
 
     study = load_study(args.study, trials=args.trials, seed=args.seed)

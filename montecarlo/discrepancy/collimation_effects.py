@@ -1,8 +1,8 @@
-"""Autocollimator-INS calibration with candidate effects for the discrepancy workflow (issue 5).
+"""Autocollimator-INS calibration with candidate effects for the discrepancy workflow.
 
-The forward model is seed 003's, :func:`montecarlo.collimation.predict_readings` (INS heading
+The forward model is seed 003's, :func:`montecarlo.seed003.model.predict_readings` (INS heading
 and pitch reported when the autocollimator is autocollimated on a mirror whose normal the
-theodolite measured), extended by the candidate effects of issue 5. The base model is the
+theodolite measured), extended by candidate effects. The base model is the
 nominal instrument, only the heading of the theodolite's azimuth zero (``frame_heading``) fitted;
 every other effect is a candidate, absent when its parameters are zero:
 
@@ -83,7 +83,7 @@ def display_unit(name: str) -> tuple[str, float]:
 
 def paper_mirrors(n_azimuth: int = 7, n_pitch: int = 7, azimuth_span: float = math.pi / 2,
                   pitch_span: float = math.pi / 3) -> MirrorData:
-    """Seed 003's fixture (:func:`montecarlo.collimation.paper_layout`), no readings."""
+    """Seed 003's fixture (:func:`montecarlo.seed003.model.paper_layout`), no readings."""
     az, el, sets = col.paper_layout(n_azimuth, n_pitch, azimuth_span, pitch_span)
     names = tuple([f"A{i + 1}" for i in range(n_azimuth)] + [f"P{i + 1}" for i in range(n_pitch)])
     zero = np.zeros_like(az)
@@ -102,7 +102,7 @@ def predict_readings(params: Mapping[str, ArrayLike], data: MirrorData, heading_
 
     References
     ----------
-    seed 003, section 2, through :func:`montecarlo.collimation.predict_readings`; the extra
+    seed 003, section 2, through :func:`montecarlo.seed003.model.predict_readings`; the extra
     effects as in the module docstring.
     """
     def p(name: str) -> FloatArray:

@@ -1,11 +1,11 @@
 """Detection, identification and adaptation (DIA) of a missing effect in a least-squares model.
 
-The generic engine of issue 5. A :class:`Problem` states the measured data through one function
-of named parameters, the *whitened* residuals ``r = W (observed - predicted)`` (unit variance,
-uncorrelated when the model is right and the stated noise is true), a base model (an
+The generic engine of the discrepancy workflow. A :class:`Problem` states the measured data through
+one function of named parameters, the *whitened* residuals ``r = W (observed - predicted)`` (unit
+variance, uncorrelated when the model is right and the stated noise is true), a base model (an
 :class:`Effect` whose parameters are always fitted) and a library of candidate effects, each a
-parametric extension of the forward model that is zero (absent) when its parameters are zero.
-The engine never sees how the data were made; it follows geodetic quality control (Baarda's data
+parametric extension of the forward model that is zero (absent) when its parameters are zero. The
+engine never sees how the data were made; it follows geodetic quality control (Baarda's data
 snooping, Teunissen's DIA):
 
 1. **Fit** the current model by nonlinear least squares (``scipy.optimize.least_squares``),
@@ -141,7 +141,6 @@ class CandidateTest:
         candidate's parameters left out at its MDB (Baarda's external reliability: how much an
         effect the test cannot see may bias the fitted model).
     lambda0 : noncentrality at which the chain detects and identifies it with ``power``.
-    lambda_bounds : upper bound of the noncentrality inside its physical bounds.
     reason : text for statuses other than testable.
     """
 
@@ -160,7 +159,6 @@ class CandidateTest:
     mdb: dict[str, float] = field(default_factory=dict)
     influence: dict[str, float] = field(default_factory=dict)
     lambda0: float = math.nan
-    lambda_bounds: float = math.nan
     reason: str = ""
     basis: FloatArray | None = field(default=None, repr=False, compare=False)
     projected: FloatArray | None = field(default=None, repr=False, compare=False)
@@ -275,7 +273,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
             c.name, status, names, retained, absorbed_by, T, q, float(np.exp(log_p)), log_p,
             math.nan, dict(zip(names, est.tolist(), strict=True)),
             dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
-            lam0, reach, reason, _orthonormal(Ga), Ga)
+            lam0, reason, _orthonormal(Ga), Ga)
         log_ps.append(log_p)
     if work:
         adjusted = holm(np.exp(log_ps))

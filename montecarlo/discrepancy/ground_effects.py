@@ -1,11 +1,11 @@
-"""Ground calibration with many surveyed targets: forward model with candidate effects (issue 5).
+"""Ground calibration with many surveyed targets: forward model with candidate effects.
 
-A sensor at the origin of frame b (x right, y forward, z up) observes targets whose positions
-were surveyed in frame b. The base model is seed 000's: the mounting angles (psi, theta, gamma)
-give ``C_b^a`` (eq. 5, :func:`montecarlo.rotations.mounting_matrix`) and the ideal pinhole maps
+A sensor at the origin of frame b (x right, y forward, z up) observes targets whose positions were
+surveyed in frame b. The base model is seed 000's: the mounting angles (psi, theta, gamma) give
+``C_b^a`` (eq. 5, :func:`montecarlo.geometry.rotations.mounting_matrix`) and the ideal pinhole maps
 the direction in frame a to pixels through its tangent plane
-(:func:`montecarlo.camera.pixels_from_direction`, eqs. 1-4). Each candidate effect extends the
-model and is absent when its parameters are zero. The prediction of one observation:
+(:func:`montecarlo.geometry.camera.pixels_from_direction`, eqs. 1-4). Each candidate effect extends
+the model and is absent when its parameters are zero. The prediction of one observation:
 
 1. target position ``r`` (surveyed, frame b): ``target_height_scale`` ``z <- z (1 + s_h)``;
    ``target_lateral_bias``, ``target_range_bias``, ``target_height_bias``
@@ -50,6 +50,7 @@ from montecarlo.geometry.camera import Camera, direction_from_pixels, pixels_fro
 from montecarlo.geometry.rotations import euler_zxy_from_matrix, mounting_matrix
 from montecarlo.io.ground_csv import GroundData
 from montecarlo.lsq import LeastSquaresFit
+from montecarlo.units import MRAD, MRAD_PER_HOUR
 
 FloatArray = NDArray[np.float64]
 
@@ -57,8 +58,6 @@ EARTH_RADIUS = 6_371_000.0
 """Mean Earth radius [m]."""
 STANDARD_REFRACTION = 0.13
 """Gauss's coefficient of terrestrial refraction [1]."""
-MRAD = 1e-3
-MRAD_PER_H = 1e-3 / 3600.0
 
 DEFAULT_MOUNTING = {"psi": math.radians(30.0), "theta": math.radians(20.0),
                     "gamma": math.radians(10.0)}
@@ -108,7 +107,7 @@ DISPLAY_UNITS = {
     **dict.fromkeys(("b_x", "b_y", "b_z", "l_x", "l_y", "l_z"), ("m", 1.0)),
     **dict.fromkeys(("psi", "theta", "gamma"), ("deg", math.pi / 180.0)),
     "rho": ("mrad", MRAD),
-    **dict.fromkeys(("w_psi", "w_theta", "w_gamma"), ("mrad/h", MRAD_PER_H)),
+    **dict.fromkeys(("w_psi", "w_theta", "w_gamma"), ("mrad/h", MRAD_PER_HOUR)),
 }
 """Parameter -> (unit shown in reports and JSON, its size in SI/radians)."""
 

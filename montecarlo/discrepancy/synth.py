@@ -96,7 +96,7 @@ def synth_ground(*, seed: int, camera: Camera, pixel_sigma: float, survey_sigma:
                  effects: Mapping[str, float], at_mdb: Mapping[str, float],
                  atmosphere: bool = True, with_time: bool = True
                  ) -> tuple[GroundData, dict[str, float], int]:
-    """One ground data set: targets of :func:`montecarlo.ground_effects.field_layout`.
+    """One ground data set: targets of :func:`montecarlo.discrepancy.ground_effects.field_layout`.
 
     ``atmosphere`` puts earth curvature and refraction at their physical values (c = 1,
     k = 0.13) unless ``effects`` sets them. Targets imaged off the detector are dropped.

@@ -76,7 +76,7 @@ def _gap(view: SystemView, fit: LeastSquaresFit) -> dict[str, float]:
 
 
 def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
-    """The issue-5 JSON of a diagnosis, parameters in display units (``units`` says which).
+    """The JSON of a diagnosis, parameters in display units (``units`` says which).
 
     Fixed keys: ``system, detected, named_effects[{name, parameters, stderr, p_value}],
     confounded_groups, absorbed, gap{before, after}{chi2_red, rms, p_value}, rms_unit``;

@@ -91,7 +91,7 @@ class Streams:
         """The generator of one source in this block (created on first use, then continued)."""
         gen = self._generators.get(source)
         if gen is None:
-            key = (self.block, source_key(source))
+            key: tuple[int, ...] = (self.block, source_key(source))
             if not self.common:
                 key = (self.point, *key)
             seq = np.random.SeedSequence(self.seed, spawn_key=key)

@@ -5,7 +5,7 @@ of the study); every block draws from its own streams (``SeedSequence(seed)`` wi
 ``(block, source)``, or ``(point, block, source)`` without common random numbers). A *task* is
 a run of consecutive blocks of one grid point; tasks may be any multiple of the block size, run
 in any order, on any worker or backend. Statistics are merged exactly (see
-:mod:`montecarlo.aggregate`), so results are bit-identical for any ``n_jobs``, chunk size and
+:mod:`montecarlo.engine.aggregate`), so results are bit-identical for any ``n_jobs``, chunk size and
 backend, on machines of one CPU type (numpy's and numba's SIMD code paths depend on it).
 
 Each finished grid point is checkpointed (pickle, written atomically) under
@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import pickle
-import shutil
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -30,12 +28,11 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from montecarlo import __version__
 from montecarlo.engine.aggregate import VALUE_COLUMNS, PointResult, PointStats
+from montecarlo.engine.checkpoints import Checkpoints
 from montecarlo.engine.study import Study
 from montecarlo.engine.tasks import PointTask, run_task
 from montecarlo.errors import InputError
-from montecarlo.io.files import atomic_write_bytes
 
 Backend = Literal["loky", "dask"]
 
@@ -119,43 +116,6 @@ def _chunk_blocks(study: Study, points: list[int], options: RunOptions) -> int:
         return options.chunk_size // bs
     total_blocks = sum(_n_blocks(study, p) for p in points)
     return min(MAX_CHUNK_BLOCKS, max(1, math.ceil(total_blocks / (4 * options.n_jobs))))
-
-
-CHECKPOINT_FORMAT = 1
-
-
-class Checkpoints:
-    """Finished grid points of one study, one pickle file each.
-
-    The directory name carries the study hash, the package version and the checkpoint format,
-    so a changed study or package never resumes from another's checkpoints.
-    """
-
-    def __init__(self, root: Path, study: Study):
-        tag = f"{study.hash()[:16]}-v{__version__}-f{CHECKPOINT_FORMAT}"
-        self.dir = root / f"{study.header.name}-{tag}"
-
-    def _file(self, point: int) -> Path:
-        return self.dir / f"point-{point:06d}.pkl"
-
-    def load(self, point: int) -> tuple[PointResult, dict] | None:
-        """The saved result of a point, or None if absent or unreadable."""
-        try:
-            loaded = pickle.loads(self._file(point).read_bytes())
-        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError):
-            return None
-        ok = isinstance(loaded, tuple) and len(loaded) == 2 and isinstance(loaded[0], PointResult)
-        return loaded if ok else None
-
-    def save(self, point: int, result: PointResult, trials: dict) -> None:
-        self.dir.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(self._file(point), pickle.dumps((result, trials)))
-
-    def remove(self) -> None:
-        """Delete this study's checkpoints (and the checkpoint root if it is left empty)."""
-        shutil.rmtree(self.dir, ignore_errors=True)
-        with contextlib.suppress(OSError):
-            self.dir.parent.rmdir()
 
 
 @contextlib.contextmanager

@@ -172,7 +172,7 @@ def _parse_sweep(path: Path, raw: Any) -> list[tuple[str, dict[str, list[Any]]]]
 
 
 def _expand(groups: list[tuple[str, dict[str, list[Any]]]]) -> list[dict[str, Any]]:
-    per_group = []
+    per_group: list[list[dict[str, Any]]] = []
     for mode, group in groups:
         keys = list(group)
         if mode == "one_at_a_time":

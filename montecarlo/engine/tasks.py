@@ -1,6 +1,6 @@
 """The unit of work of the study runner: consecutive blocks of trials of one grid point.
 
-Kept apart from :mod:`montecarlo.runner` so that worker processes import only what a task
+Kept apart from :mod:`montecarlo.engine.runner` so that worker processes import only what a task
 needs (numpy, the system and, for fast systems, numba), not pandas, plotting or the scheduler.
 """
 

@@ -1,9 +1,9 @@
 """Ideal pinhole camera of seed 000, section 1.1: pixels <-> equivalent angles <-> directions.
 
-Frame ``a`` (the product frame) has y along the optical axis and x, z parallel to the focal
-plane. A pixel coordinate is measured from the image centre: ``f_mx`` along x (positive to the
-right), ``f_mz`` along z (positive up). The text calls the pixel count that scales x ``f_x`` and
-the one that scales z ``f_z`` but labels them the other way round (NOTES.md); here ``n_x`` is the
+Frame ``a`` (the product frame) has y along the optical axis and x, z parallel to the focal plane. A
+pixel coordinate is measured from the image centre: ``f_mx`` along x (positive to the right),
+``f_mz`` along z (positive up). The text calls the pixel count that scales x ``f_x`` and the one
+that scales z ``f_z`` but labels them the other way round (docs/conventions.md); here ``n_x`` is the
 pixel count across x (the yaw field of view) and ``n_z`` across z (the pitch field of view).
 
 Two equivalent forms are provided:
@@ -44,13 +44,14 @@ class Camera:
     n_x, n_z : float or array_like [px]
         Pixel counts across x and across z.
 
-    Arrays describe one camera per trial and broadcast against the trial axes.
+    Arrays describe one camera per trial and broadcast against the trial axes. Values are
+    stored as floats (or float arrays) whatever numbers they were given as.
     """
 
-    fov_yaw: ArrayLike
-    fov_pitch: ArrayLike
-    n_x: ArrayLike
-    n_z: ArrayLike
+    fov_yaw: float | FloatArray
+    fov_pitch: float | FloatArray
+    n_x: float | FloatArray
+    n_z: float | FloatArray
 
     def __post_init__(self) -> None:
         for name in ("fov_yaw", "fov_pitch", "n_x", "n_z"):
@@ -70,7 +71,8 @@ class Camera:
         cls, fov_yaw_deg: ArrayLike, fov_pitch_deg: ArrayLike, n_x: ArrayLike, n_z: ArrayLike
     ) -> Camera:
         """Build a camera from fields of view in degrees (the units of data sheets)."""
-        return cls(np.radians(fov_yaw_deg), np.radians(fov_pitch_deg), n_x, n_z)
+        return cls(np.radians(fov_yaw_deg), np.radians(fov_pitch_deg), np.asarray(n_x, float),
+                   np.asarray(n_z, float))
 
     @property
     def k_x(self) -> FloatArray:
@@ -149,6 +151,17 @@ def equivalent_angles_from_pixels(
     References
     ----------
     seed 000, eq. (3).
+
+    Examples
+    --------
+    The trigonometric route of eqs. (3)-(4) gives the same direction as the vector form:
+
+    >>> import numpy as np
+    >>> cam = Camera.from_degrees(90.0, 90.0, 512, 512)
+    >>> angles = equivalent_angles_from_pixels(128.0, 64.0, cam)
+    >>> bool(np.allclose(direction_from_equivalent_angles(*angles),
+    ...                  direction_from_pixels(128.0, 64.0, cam), atol=1e-15))
+    True
     """
     tx = 2.0 * np.asarray(f_mx, float) / camera.n_x * np.tan(camera.fov_yaw / 2.0)
     tz = 2.0 * np.asarray(f_mz, float) / camera.n_z * np.tan(camera.fov_pitch / 2.0)
@@ -222,6 +235,16 @@ def pixels_from_direction(u: ArrayLike, camera: Camera) -> tuple[FloatArray, Flo
     References
     ----------
     seed 000, eqs. (1)-(2) combined; equal to eq. (4) applied to the angles of eq. (10).
+
+    Examples
+    --------
+    Seed 000's camera (90 x 90 deg, 512 x 512 px) has 256 px per unit tangent, so a direction
+    45 deg to the right lies on the detector's right edge:
+
+    >>> import numpy as np
+    >>> cam = Camera.from_degrees(90.0, 90.0, 512, 512)
+    >>> np.round(pixels_from_direction([1.0, 1.0, 0.0], cam), 9)
+    array([256.,   0.])
     """
     u = np.asarray(u, float)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -240,6 +263,16 @@ def direction_from_pixels(f_mx: ArrayLike, f_mz: ArrayLike, camera: Camera) -> F
     References
     ----------
     seed 000, eqs. (1)-(3) combined.
+
+    Examples
+    --------
+    The round trip with :func:`pixels_from_direction`:
+
+    >>> import numpy as np
+    >>> cam = Camera.from_degrees(60.0, 40.0, 640, 480)
+    >>> u = direction_from_pixels(100.0, -50.0, cam)
+    >>> np.round(pixels_from_direction(u, cam), 9)
+    array([100., -50.])
     """
     f_mx, f_mz = np.broadcast_arrays(np.asarray(f_mx, float), np.asarray(f_mz, float))
     v = np.stack([f_mx / camera.k_x, np.ones_like(f_mx), f_mz / camera.k_z], axis=-1)

@@ -1,7 +1,8 @@
 """Calibration error metrics of seed 000, eqs. (17)-(18), and the rotation angles kept apart.
 
 ``D = C_a^c = C_b^c (C_b^a)^T`` is the rotation from the true product frame a to the computed
-frame c. Three scalar "angles" of D appear around seed 000 and must never be confused (NOTES.md):
+frame c. Three scalar "angles" of D appear around seed 000 and must never be confused
+(docs/conventions.md):
 
 =================  ================================  ==========================================
 name               formula                           relation to the true rotation angle phi
@@ -54,6 +55,17 @@ def rotation_angle(D: ArrayLike) -> FloatArray:
     """True rotation angle phi [rad] of D, in [0, pi]; equals ``arccos((tr D - 1) / 2)``.
 
     Computed as ``atan2(|axial vector|, (tr D - 1) / 2)``, accurate for small and large angles.
+
+    Examples
+    --------
+    The three metrics of one error rotation of 1 mrad (docs/conventions.md):
+
+    >>> from scipy.spatial.transform import Rotation
+    >>> D = Rotation.from_rotvec([0.0, 0.0, 1e-3]).as_matrix()
+    >>> round(float(rotation_angle(D)), 12), round(float(eq18_angle(D)), 12)
+    (0.001, 0.0005)
+    >>> round(float(table1_angle(D)) * 2**0.5, 6)
+    0.001
     """
     D = np.asarray(D, float)
     axial = np.stack(
@@ -79,12 +91,12 @@ def eq18_angle(D: ArrayLike) -> FloatArray:
 def table1_angle(D: ArrayLike) -> FloatArray:
     """The metric behind Table 1, ``arccos((1 + tr D) / 4)`` [rad]; about phi / sqrt(2).
 
-    Not a formula printed in seed 000: NOTES.md shows that all twelve values of Table 1 are
-    reproduced by this expression (the paper's Delta and normalised Delta).
+    Not a formula printed in seed 000: docs/conventions.md shows that all twelve values of
+    Table 1 are reproduced by this expression (the paper's Delta and normalised Delta).
 
     References
     ----------
-    seed 000, Table 1; NOTES.md, "how Table 1 was computed".
+    seed 000, Table 1; docs/conventions.md, "How seed 000's Table 1 was computed".
     """
     return np.arccos(np.clip((1.0 + _trace(D)) / 4.0, -1.0, 1.0))
 

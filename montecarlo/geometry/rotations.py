@@ -1,9 +1,9 @@
 """Z-X-Y Euler rotations of seed 000: matrices from angles (eqs. 5, 7), angles back (eqs. 14, 17).
 
-Convention (NOTES.md): the attitude of frame a relative to frame b is a yaw ``psi`` about z, then a
-pitch ``theta`` about the new x, then a roll ``gamma`` about the new y (intrinsic Z-X-Y). The matrix
-of eq. (5) is the *passive* (frame-transformation) matrix ``C_b^a``, which maps coordinates in b to
-coordinates in a::
+Convention (docs/conventions.md): the attitude of frame a relative to frame b is a yaw ``psi`` about
+z, then a pitch ``theta`` about the new x, then a roll ``gamma`` about the new y (intrinsic Z-X-Y).
+The matrix of eq. (5) is the *passive* (frame-transformation) matrix ``C_b^a``, which maps
+coordinates in b to coordinates in a::
 
     C_b^a = R_y(gamma) R_x(theta) R_z(psi)
           = Rotation.from_euler("ZXY", [psi, theta, gamma]).as_matrix().T
@@ -39,6 +39,23 @@ def mounting_matrix(psi: ArrayLike, theta: ArrayLike, gamma: ArrayLike) -> Float
     References
     ----------
     seed 000, eq. (5).
+
+    Examples
+    --------
+    A yaw of 90 deg about z: the b frame's x axis becomes the a frame's -y axis.
+
+    >>> import numpy as np
+    >>> C = mounting_matrix(np.pi / 2, 0.0, 0.0)
+    >>> (C @ [1.0, 0.0, 0.0]).round(12) + 0.0
+    array([ 0., -1.,  0.])
+
+    It is the transpose of scipy's intrinsic Z-X-Y rotation:
+
+    >>> from scipy.spatial.transform import Rotation
+    >>> angles = np.radians([30.0, 20.0, 10.0])
+    >>> bool(np.allclose(mounting_matrix(*angles),
+    ...                  Rotation.from_euler("ZXY", angles).as_matrix().T, atol=1e-15))
+    True
     """
     psi, theta, gamma = np.broadcast_arrays(*(np.asarray(v, float) for v in (psi, theta, gamma)))
     cp, sp = np.cos(psi), np.sin(psi)
@@ -88,6 +105,13 @@ def euler_zxy_from_matrix(C: ArrayLike) -> tuple[FloatArray, FloatArray, FloatAr
     References
     ----------
     seed 000, eq. (17).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> angles = np.radians([30.0, 20.0, 10.0])
+    >>> np.degrees(euler_zxy_from_matrix(mounting_matrix(*angles))).round(12)
+    array([30., 20., 10.])
     """
     C = np.asarray(C, float)
     theta = np.arcsin(np.clip(C[..., 1, 2], -1.0, 1.0))  # seed 000, eq. (17)
@@ -123,6 +147,14 @@ def mounting_angles_from_columns(
     References
     ----------
     seed 000, eq. (14).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> C = mounting_matrix(*np.radians([30.0, 20.0, 10.0]))
+    >>> angles = mounting_angles_from_columns(C[0, 1], C[2, 1], C[0, 2], C[1, 2], C[2, 2])
+    >>> np.degrees(angles).round(12)
+    array([30., 20., 10.])
     """
     c12, c32, c13, c23, c33 = (np.asarray(v, float) for v in (c12, c32, c13, c23, c33))
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -57,15 +57,15 @@ class MirrorData:
                 "theodolite_el": self.theodolite_el.tolist(),
                 "ins_roll": None if self.ins_roll is None else self.ins_roll.tolist()}
 
-
-def layout_from_json(text: str) -> MirrorData:
-    """A :class:`MirrorData` with zero INS readings from :meth:`MirrorData.layout` as JSON."""
-    raw = json.loads(text)
-    az = np.asarray(raw["theodolite_az"], float)
-    roll = raw.get("ins_roll")
-    return MirrorData(tuple(raw["mirror"]), tuple(raw["set"]), az,
-                      np.asarray(raw["theodolite_el"], float), np.zeros_like(az),
-                      np.zeros_like(az), None if roll is None else np.asarray(roll, float))
+    @classmethod
+    def from_layout(cls, text: str) -> MirrorData:
+        """A :class:`MirrorData` with zero INS readings from :meth:`MirrorData.layout` as JSON."""
+        raw = json.loads(text)
+        az = np.asarray(raw["theodolite_az"], float)
+        roll = raw.get("ins_roll")
+        return cls(tuple(raw["mirror"]), tuple(raw["set"]), az,
+                   np.asarray(raw["theodolite_el"], float), np.zeros_like(az),
+                   np.zeros_like(az), None if roll is None else np.asarray(roll, float))
 
 
 def read_mirror_csv(path: str | Path, min_mirrors: int = 1, need: str = "") -> MirrorData:

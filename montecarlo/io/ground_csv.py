@@ -62,16 +62,16 @@ class GroundData:
             out["session"] = list(self.session)
         return out
 
-
-def layout_from_json(text: str) -> GroundData:
-    """A :class:`GroundData` with zero pixels from :meth:`GroundData.layout` as JSON."""
-    raw = json.loads(text)
-    positions = np.column_stack([raw["x_m"], raw["y_m"], raw["z_m"]]).astype(float)
-    n = positions.shape[0]
-    return GroundData(tuple(raw.get("target", [f"T{i + 1}" for i in range(n)])), positions,
-                      np.zeros((n, 2)),
-                      None if raw.get("t_s") is None else np.asarray(raw["t_s"], float),
-                      None if raw.get("session") is None else tuple(map(str, raw["session"])))
+    @classmethod
+    def from_layout(cls, text: str) -> GroundData:
+        """A :class:`GroundData` with zero pixels from :meth:`GroundData.layout` as JSON."""
+        raw = json.loads(text)
+        positions = np.column_stack([raw["x_m"], raw["y_m"], raw["z_m"]]).astype(float)
+        n = positions.shape[0]
+        return cls(tuple(raw.get("target", [f"T{i + 1}" for i in range(n)])), positions,
+                   np.zeros((n, 2)),
+                   None if raw.get("t_s") is None else np.asarray(raw["t_s"], float),
+                   None if raw.get("session") is None else tuple(map(str, raw["session"])))
 
 
 CSV_COLUMNS = ("target", "x_m", "y_m", "z_m", "px", "pz")

@@ -1,7 +1,7 @@
 """Plots of study results: trends against swept parameters, histograms, the L x H map.
 
 All functions build ``matplotlib.figure.Figure`` objects (no pyplot state, no display) and take
-the summary frame of :meth:`montecarlo.runner.StudyResult.to_frame`.
+the summary frame of :meth:`montecarlo.engine.runner.StudyResult.to_frame`.
 """
 
 from __future__ import annotations

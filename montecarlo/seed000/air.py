@@ -15,9 +15,9 @@ vector ``v`` has the passive matrix ``exp([v x])^T``):
 
 * transfer-alignment error ``phi = (phi_E, phi_N, phi_U)`` in the navigation frame g (east,
   north, up): the slave's computed navigation frame g' is g turned by phi (the psi-angle
-  convention of :mod:`montecarlo.transfer_alignment`). ``phi_U`` is the heading error, ``phi_E``
-  and ``phi_N`` the two level errors. With ``level_split = "total"`` the printed level figure is
-  the root-sum-square of the two level axes (each axis ``level_sigma / sqrt(2)``), with
+  convention of :mod:`montecarlo.seed000.transfer_alignment`). ``phi_U`` is the heading error,
+  ``phi_E`` and ``phi_N`` the two level errors. With ``level_split = "total"`` the printed level
+  figure is the root-sum-square of the two level axes (each axis ``level_sigma / sqrt(2)``), with
   ``"per_axis"`` each axis has ``level_sigma``;
 * installation error ``epsilon`` in the product frame a: the IMU frame a_1 is a turned by epsilon,
   each component uniform in ``[-install_bound, install_bound]`` (the paper gives a bound);
@@ -29,12 +29,12 @@ vector ``v`` has the passive matrix ``exp([v x])^T``):
 
 The error matrix is ``D = C_a^c = C_b^c (C_b^a)^T`` with ``C_b^c`` the mounting matrix computed
 by eq. (19) from the two reported attitudes; its rotation metrics (kept apart by name,
-:mod:`montecarlo.metrics`) and eq. (17) per-axis errors are the outputs.
+:mod:`montecarlo.geometry.metrics`) and eq. (17) per-axis errors are the outputs.
 
 References
 ----------
 seed 000, section 2, eq. (19) and the error relation after it, Table 2; eqs. (5), (17), (18).
-NOTES.md, "Seed 000 — air dynamic calibration".
+docs/conventions.md, "Seed 000: the air dynamic calibration".
 """
 
 from __future__ import annotations
@@ -50,12 +50,12 @@ from scipy.spatial.transform import Rotation
 from montecarlo.errors import InputError
 from montecarlo.geometry.metrics import AXIS_METRICS, ROTATION_METRICS, all_metrics, error_matrix
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed000 import table2 as t2
 from montecarlo.seed000 import transfer_alignment as ta
+from montecarlo.units import ARCMIN, DEG_PER_HOUR, G0, MRAD
 
 FloatArray = NDArray[np.float64]
 
-ARCMIN = ta.ARCMIN
-MRAD = 1e-3
 
 PAPER_HEADING = 3.0 * ARCMIN
 """Seed 000, Table 2 rows 3-5: IMU heading accuracy, 1σ [rad]."""
@@ -76,8 +76,8 @@ DEFAULT_PARAMS: dict[str, float | int | str] = {
     "heading_sigma": PAPER_HEADING,
     "level_sigma": PAPER_LEVEL,
     "level_split": "total",
-    "gyro_drift": 0.05 * ta.DEG_PER_HOUR,
-    "accel_bias": 5e-5 * ta.G0,
+    "gyro_drift": 0.05 * DEG_PER_HOUR,
+    "accel_bias": 5e-5 * G0,
     "install_bound": PAPER_INSTALL_BOUND,
     "master_heading_sigma": 0.0,
     "master_level_sigma": 0.0,
@@ -90,12 +90,6 @@ DEFAULT_PARAMS: dict[str, float | int | str] = {
     "aircraft_roll": 0.0,
 }
 """Defaults of :func:`run_trials` (SI units, radians); see its docstring."""
-
-METRIC_UNITS = {name: "rad" for name in
-                [*ROTATION_METRICS, "delta_psi", "delta_theta", "delta_gamma",
-                 "heading_error", "level_error"]}
-"""Per-trial outputs of :func:`run_trials` and their units."""
-
 
 def frame_turned_by(rotvec: ArrayLike) -> FloatArray:
     """Passive matrix ``C_old^new`` of a frame turned by a rotation vector, ``exp([v x])^T``.
@@ -192,13 +186,13 @@ def level_heading_covariance(heading_sigma: float, level_sigma: float, level_spl
     return np.diag([per_axis**2, per_axis**2, heading_sigma**2])
 
 
-def table2_row(gyro_drift: float, accel_bias: float) -> ta.Table2Row:
+def table2_row(gyro_drift: float, accel_bias: float) -> t2.Table2Row:
     """The Table 2 row of an IMU grade (relative tolerance 1e-6), else InputError."""
-    for row in ta.TABLE2_ROWS:
+    for row in t2.TABLE2_ROWS:
         if np.isclose(gyro_drift, row.gyro_drift, rtol=1e-6, atol=0.0) and np.isclose(
                 accel_bias, row.accel_bias, rtol=1e-6, atol=0.0):
             return row
-    grades = ", ".join(f"({r.gyro_deg_h} °/h, {r.accel_g:g} g)" for r in ta.TABLE2_ROWS)
+    grades = ", ".join(f"({r.gyro_deg_h} °/h, {r.accel_g:g} g)" for r in t2.TABLE2_ROWS)
     raise InputError(
         f"gyro_drift={gyro_drift!r} rad/s, accel_bias={accel_bias!r} m/s² is not a Table 2 "
         f"grade; Table 2 has {grades}")
@@ -221,7 +215,7 @@ def transfer_alignment_covariance(params: Mapping[str, float | int | str]) -> Fl
         return level_heading_covariance(row.heading_arcmin * ARCMIN, row.level_arcmin * ARCMIN,
                                         str(params["level_split"]))
     if source == "kalman":
-        cfg = ta.grade_config(float(params["gyro_drift"]), float(params["accel_bias"]))
+        cfg = t2.grade_config(float(params["gyro_drift"]), float(params["accel_bias"]))
         return ta.final_attitude_covariance(
             replace(cfg, mount=(float(params["mount_psi"]), float(params["mount_theta"]),
                                 float(params["mount_gamma"]))))

@@ -2,10 +2,10 @@
 
 Literal, vectorised reference implementation: every step follows the paper's trigonometric
 form (equivalent angles, eq. (7) matrices). Functions take whole batches of trials (leading axes
-broadcast) and flag invalid geometry per trial with :class:`montecarlo.invalid.Invalid`.
+broadcast) and flag invalid geometry per trial with :class:`montecarlo.geometry.invalid.Invalid`.
 
-Frames (NOTES.md): base b has x right, y forward, z up, origin at the sensor; target A is on the
-forward axis at range L and the sensor's height, target B is A raised by H.
+Frames (docs/conventions.md): base b has x right, y forward, z up, origin at the sensor; target A is
+on the forward axis at range L and the sensor's height, target B is A raised by H.
 
 References
 ----------
@@ -295,15 +295,14 @@ def simulate(
         sol = solve_mounting(pix_a, pix_b, L, H, camera, normalise=(name == "normalised"))
         flags = np.where(forward_flags != 0, forward_flags, sol.invalid).astype(FLAG_DTYPE)
         ok = flags == 0
-        out[name] = MountingSolution(
-            *(np.where(ok, v, np.nan) for v in (sol.psi, sol.theta, sol.gamma)), flags
-        )
+        psi, theta, gamma = (np.where(ok, v, np.nan) for v in (sol.psi, sol.theta, sol.gamma))
+        out[name] = MountingSolution(psi, theta, gamma, flags)
     return out
 
 
 def solution_metrics(solution: MountingSolution, true_angles: tuple[ArrayLike, ...]
                      ) -> dict[str, FloatArray]:
-    """Error metrics of a solution against the true angles (see :mod:`montecarlo.metrics`) [rad].
+    """Error metrics of a solution against the true angles [rad] (:mod:`.geometry.metrics`).
 
     References
     ----------

@@ -1,19 +1,19 @@
 """Reproduction of seed 000, Table 1: worst-case ground calibration error over the error bounds.
 
-The paper prints twelve numbers (Delta and normalised Delta for six rows). NOTES.md established
-how they were computed, and this module recomputes them from the model, never from the printed
-values (those are kept only to be shown beside ours):
+The paper prints twelve numbers (Delta and normalised Delta for six rows). docs/conventions.md
+records how they were computed, and this module recomputes them from the model, never from the
+printed values (those are kept only to be shown beside ours):
 
 * true mounting angles psi = 30 deg, theta = 20 deg, gamma = 10 deg; 90 x 90 deg field of view;
   512 x 512 pixels;
 * the worst case over the 2**6 corners of the bounds: dx, dy, dh1 = +-0.1 m, the height-scale
   error dh = +-db, and one pixel error (+-df along x, +-df along z) common to both targets;
 * the solver run without and with the normalisation of eq. (13);
-* the metric ``table1_angle = arccos((1 + tr D) / 4)`` (see :mod:`montecarlo.metrics`).
+* the metric ``table1_angle = arccos((1 + tr D) / 4)`` (see :mod:`montecarlo.geometry.metrics`).
 
 References
 ----------
-seed 000, section 1.4 and Table 1; NOTES.md, "how Table 1 was computed".
+seed 000, section 1.4 and Table 1; docs/conventions.md, "How seed 000's Table 1 was computed".
 """
 
 from __future__ import annotations

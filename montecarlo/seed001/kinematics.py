@@ -1,11 +1,12 @@
-"""Gyro indirect stabilisation of seed 001: exact-kinematics simulator and linearised model.
+"""Gyro indirect stabilisation of seed 001: frames, the carrier's rocking, eqs. (1)-(4).
 
 An IMU and a two-axis gimbal (azimuth ``eta`` outer, pitch ``eps`` inner) carrying a camera sit on
 a rocking carrier. The gimbal is stabilised *indirectly*: it integrates the rates of eq. (4)
 computed from the IMU's measured carrier rate. IMU and camera installation angles make the line
 of sight (LOS) drift; the camera sees the drift as the motion of a fixed target in the image.
-The estimator that turns the drift back into angles is in
-:mod:`montecarlo.stabilization_estimation`.
+The simulator is :mod:`montecarlo.seed001.simulate`, the linearised model
+:mod:`montecarlo.seed001.linear_model`, the estimator that turns the drift back into angles
+:mod:`montecarlo.seed001.estimate`.
 
 Frames and sign conventions (all right-handed; every matrix is *passive*, ``C_a^b`` maps
 coordinates in a to coordinates in b; ``R_x, R_y, R_z`` are the passive elementary rotations,
@@ -30,15 +31,15 @@ The IMU measures ``w_m = C_b^g w_b + bias + noise`` [rad/s].
 
 Image: the target is the point the LOS aimed at at ``t = 0``; with ``u`` its direction in frame c,
 its image is at ``x_px = k_x u_x / u_y`` (right), ``z_px = k_z u_z / u_y`` (up)
-(:func:`montecarlo.camera.pixels_from_direction`). ``los_x_px, los_z_px`` are this image position:
-a LOS turned by a small angle ``a`` to the left (about +z) moves the target to ``x_px = +k_x a``;
-a LOS turned up by ``a`` (about +x) moves it to ``z_px = -k_z a``.
+(:func:`montecarlo.geometry.camera.pixels_from_direction`). ``los_x_px, los_z_px`` are this image
+position: a LOS turned by a small angle ``a`` to the left (about +z) moves the target to
+``x_px = +k_x a``; a LOS turned up by ``a`` (about +x) moves it to ``z_px = -k_z a``.
 
 All functions broadcast: batch axes first, then time, then vector components ``(..., N, 3)``.
 
 References
 ----------
-seed 001: patent CN102288133B (2013), eqs. (1)-(6); NOTES.md, "Seed 001 - cautions".
+seed 001: patent CN102288133B (2013), eqs. (1)-(6); docs/conventions.md, "Seed 001: cautions".
 """
 
 from __future__ import annotations

@@ -227,9 +227,6 @@ class Observability:
 
     Attributes
     ----------
-    singular_values : ndarray, shape (4,) [1/rad]
-        Of the stacked drift model of ``X`` (divided by the image noise) once the nuisance
-        parameters are projected out.
     rank : int
         Numerical rank for ``X`` (4 when every combination is seen).
     raw_rank : int
@@ -244,7 +241,6 @@ class Observability:
         seen independently of the others.
     """
 
-    singular_values: FloatArray
     rank: int
     raw_rank: int
     raw_null_space: FloatArray
@@ -264,7 +260,7 @@ def observability(
     image_noise : float [px]
     nuisance : bool
         Estimate the gyro biases and the image offset of the target beside ``X`` (as
-        :func:`montecarlo.stabilization_estimation.estimate` does); False: known.
+        :func:`montecarlo.seed001.estimate.estimate` does); False: known.
     """
     M = drift_matrix(record.t, record.gyro, record.eta, record.eps, camera) / image_noise
     X = M[..., :4].reshape(-1, 4)
@@ -284,5 +280,5 @@ def observability(
         residual = X[:, j] - others @ np.linalg.lstsq(others, X[:, j], rcond=None)[0]
         norm = np.linalg.norm(residual)
         sigma[j] = 1.0 / norm if norm > tol else np.inf
-    return Observability(singular_values=s, rank=int(np.sum(s > tol)),
+    return Observability(rank=int(np.sum(s > tol)),
                          raw_rank=raw_rank, raw_null_space=null, sigma=sigma)

@@ -68,11 +68,6 @@ REGISTRY: dict[str, Callable[[], System]] = {
 """System name -> factory; each system's module is imported only when a study names it."""
 
 
-def get_system(name: str) -> System:
-    """The system of that name (KeyError if none)."""
-    return REGISTRY[name]()
-
-
 def load_study(path: str | Path, *, trials: int | None = None, seed: int | None = None
                ) -> Study:
     """Read, validate and expand a study file; ``trials``/``seed`` override the file's.

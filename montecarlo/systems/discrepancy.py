@@ -26,9 +26,8 @@ from montecarlo.discrepancy.view import SystemView
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.engine.system import Metric
 from montecarlo.geometry.camera import Camera
-from montecarlo.io.collimation_csv import layout_from_json as mirror_layout_from_json
+from montecarlo.io.collimation_csv import MirrorData
 from montecarlo.io.ground_csv import GroundData
-from montecarlo.io.ground_csv import layout_from_json as ground_layout_from_json
 from montecarlo.seed003.model import Noise
 from montecarlo.systems.params import ParamSystem, study_params
 from montecarlo.units import ARCSEC
@@ -101,7 +100,7 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
     if p["extra_truth"]:
         truth.update({k: float(v) for k, v in json.loads(str(p["extra_truth"])).items()})
     layout = (default_layout(camera, truth) if not p["layout"]
-              else ground_layout_from_json(str(p["layout"])))
+              else GroundData.from_layout(str(p["layout"])))
     sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
     alpha = float(p["alpha"])
     expected = str(p["expected"])
@@ -189,7 +188,7 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
     p = {**COLLIMATION_DEFAULTS, **params}
     layout = (ce.paper_mirrors(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
                             float(p["pitch_span"]))
-              if not p["layout"] else mirror_layout_from_json(str(p["layout"])))
+              if not p["layout"] else MirrorData.from_layout(str(p["layout"])))
     ins = float(p["ins_sigma"])
     noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
     sigma = math.hypot(noise.theodolite, ins)

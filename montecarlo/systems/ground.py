@@ -273,7 +273,7 @@ class GroundSystem:
 
     def simulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
                        n: int) -> tuple[BlockValues, BlockInvalid]:
-        """Per-trial metrics through the literal reference implementation (montecarlo.ground)."""
+        """Per-trial metrics through the literal reference (:mod:`montecarlo.seed000.ground`)."""
         p = prepared
         true, e = self.draws(p, streams, first_trial, n)
         solutions = ground.simulate(

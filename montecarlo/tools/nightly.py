@@ -6,7 +6,7 @@ Runs ``studies/table1.toml`` and ``studies/trends.toml``, checks
 * under pixel error common to both targets: Delta falls with the range L, falls with the height
   difference H up to 2 m (the paper: "H matters below 2 m, little above"), rises with the pixel
   error df and with the height-scale error delta_b;
-* under independent pixel noise: Delta rises with L (the L trend reverses, NOTES.md);
+* under independent pixel noise: Delta rises with L (the L trend reverses, docs/conventions.md);
 
 for both solver variants, on the mean and the p95 of the true rotation angle. Appends one row
 per check to ``results/nightly/history.csv``, writes ``results/nightly/report.md`` and exits
@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 
 from montecarlo import __version__
-from montecarlo.engine.runner import Checkpoints, RunOptions, run_study
+from montecarlo.engine.checkpoints import Checkpoints
+from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.io.files import atomic_write_bytes
 from montecarlo.output.outputs import write_outputs
 from montecarlo.output.provenance import git_commit
