@@ -126,7 +126,7 @@ def study_memory(trials: int) -> dict[str, float]:
             lines.append(f"[{section}]")
             lines += [f"{k} = {_toml(v)}" for k, v in table.items()]
         path.write_text("\n".join(lines) + "\n")
-        proc = psutil.Popen([sys.executable, "-m", "montecarlo.cli", "run", str(path),
+        proc = psutil.Popen([sys.executable, "-m", "montecarlo", "run", str(path),
                              "--quiet", "--out", str(Path(tmp) / "out")],
                             stdout=subprocess.DEVNULL)
         peak = {"max_process_rss_mb": 0.0, "tree_rss_mb": 0.0, "tree_pss_mb": 0.0}
@@ -156,7 +156,7 @@ def _toml(value: Any) -> str:
 
 def compile_seconds() -> float:
     """First-run compile time of the kernel with an empty numba cache (in a fresh process)."""
-    code = ("import time; t = time.perf_counter(); from montecarlo import bench; "
+    code = ("import time; t = time.perf_counter(); from montecarlo.tools import bench; "
             "bench._block_rate(8192, 1, True); print(time.perf_counter() - t)")
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
