@@ -1,5 +1,10 @@
-"""Exceptions that the command line turns into one-line messages and exit code 2."""
+"""Exceptions the command line turns into one-line messages: bad input (exit 2), a stopped run."""
 
 
 class InputError(Exception):
     """Bad user input (study file, CSV, flag); the message names the file, field and value."""
+
+
+class RunInterrupted(Exception):
+    """A run stopped before it finished (Ctrl-C, or no worker left); the message says what is
+    kept and how to resume."""

@@ -68,7 +68,7 @@ def test_block_order_and_grouping_do_not_change_anything():
 
 def test_merge_refuses_a_block_twice():
     m = _stats(np.ones(2000))
-    with pytest.raises(ValueError, match="merged twice"):
+    with pytest.raises(ValueError, match="added twice"):
         m.merge(_stats(np.ones(1000)))
 
 
@@ -117,11 +117,58 @@ def test_too_few_trials_leave_interval_open():
 def test_point_summary_counts_invalid_by_reason():
     ps = agg.PointStats()
     ps.add_block(0, {("raw", "a"): np.array([1.0, np.nan, 3.0])},
-                 {"raw": {"total": 1, "OUTSIDE_FOV": 1}})
-    ps.add_block(1, {("raw", "a"): np.array([2.0])}, {"raw": {"total": 0}})
+                 {"raw": {"total": 1, "OUTSIDE_FOV": 1}}, 3)
+    ps.add_block(1, {("raw", "a"): np.array([2.0])}, {"raw": {"total": 0}}, 1)
     row = ps.summary({"a": False}, 0.95).iloc[0]
     assert row["count"] == 3 and row["invalid"] == 1 and row["invalid_OUTSIDE_FOV"] == 1
-    assert row["mean"] == 2.0 and row["max"] == 3.0
+    assert row["trials"] == 4 and row["invalid_fraction"] == 0.25
+    assert row["mean"] == 2.0 and row["max"] == 3.0 and row["percentiles_over"] == "valid"
+
+
+def _point(valid: int, invalid: int, value: float = 1.0) -> agg.PointStats:
+    """One block of ``valid`` trials at ``value`` (jittered) and ``invalid`` without a value."""
+    values = np.concatenate([value * (1 + 1e-3 * np.random.default_rng(0).random(valid)),
+                             np.full(invalid, np.nan)])
+    ps = agg.PointStats()
+    ps.add_block(0, {("v", "m"): values}, {"v": {"total": invalid}}, values.size)
+    return ps
+
+
+@pytest.mark.parametrize(("statistic", "invalid", "verdict"), [
+    ("p95", 0, "meets"),   # all 1000 trials well below the limit
+    ("p95", 100, "fails"),  # rank 950 lies among the 100 trials without a value (+inf)
+    ("p50", 100, "meets"),  # rank 500 and its interval lie among the valid trials
+    ("max", 1, "fails"),   # one failed calibration is a failed spec on the max
+    ("mean", 1, "fails"),
+    ("mean", 0, "meets"),
+])
+def test_spec_verdict_counts_a_trial_without_a_value_as_exceeding(statistic, invalid, verdict):
+    spec = agg.SpecCheck("m", None, statistic, 2.0)
+    row = _point(1000 - invalid, invalid).summary({"m": False}, 0.95, spec).iloc[0]
+    assert row["verdict"] == verdict
+    if verdict == "fails" and statistic != "p50":
+        assert row["spec_value"] == np.inf
+    assert row[statistic] < 2.0  # over the valid trials the statistic alone would meet
+
+
+def test_all_trials_invalid_fails_rather_than_undecided():
+    spec = agg.SpecCheck("m", None, "p95", 2.0)
+    row = _point(0, 50).summary({"m": False}, 0.95, spec).iloc[0]
+    assert row["verdict"] == "fails" and row["invalid_fraction"] == 1.0
+
+
+def test_too_few_trials_for_a_percentile_bound_are_undecided():
+    spec = agg.SpecCheck("m", None, "p99", 2.0)
+    row = _point(20, 0).summary({"m": False}, 0.95, spec).iloc[0]
+    assert row["verdict"] == "undecided" and np.isnan(row["spec_hi"])
+
+
+def test_spec_applies_only_to_its_metric_and_variant():
+    ps = _point(10, 0)
+    ps.add_block(0, {("w", "m"): np.ones(10)}, {"w": {"total": 0}}, 0)
+    verdicts = ps.summary({"m": False}, 0.95, agg.SpecCheck("m", "w", "max", 2.0)) \
+        .set_index("variant")["verdict"]
+    assert verdicts.isna()["v"] and verdicts["w"] == "meets"
 
 
 def test_accumulate_equals_reference_aggregation():
@@ -137,7 +184,7 @@ def test_accumulate_equals_reference_aggregation():
         ref = agg.MetricStats()
         ref.add_block(0, values[r])
         np.testing.assert_array_equal(hist[r], ref.hist)
-        n, mean, m2 = ref.blocks[0]
+        n, mean, m2 = ref.moments()
         assert stats[r, 0] == n
         assert stats[r, 1] == pytest.approx(mean, rel=1e-12)
         assert stats[r, 2] == pytest.approx(m2, rel=1e-10)

@@ -145,6 +145,7 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
     n_done = len(list(ck_root.glob("*/point-*.pkl")))
     assert 5 <= n_done < 30, n_done
     assert not b.exists()  # no half-written results
+    assert list(b.parent.glob(".out.tmp-*"))  # the killed run's staging directory is left
 
     rerun = subprocess.run([*cmd, "--out", str(b)], capture_output=True, text=True, timeout=600)
     assert rerun.returncode == 0, rerun.stderr
@@ -152,3 +153,4 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(b / "summary.parquet"),
                                   pd.read_parquet(a / "summary.parquet"), check_exact=True)
     assert not ck_root.exists()  # cleaned up after success
+    assert not list(b.parent.glob(".out.*"))  # and the stale staging directory removed

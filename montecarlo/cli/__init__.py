@@ -7,6 +7,7 @@ Every subcommand reports bad input as one line on stderr and exits with code 2.
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -14,7 +15,7 @@ from collections.abc import Sequence
 from montecarlo import __version__
 from montecarlo.cli import collimation, design, diagnose, seed000, stabilization, study
 from montecarlo.cli.common import EXIT_BAD_INPUT, Parser
-from montecarlo.errors import InputError
+from montecarlo.errors import InputError, RunInterrupted
 
 GROUPS = (study, seed000, collimation, stabilization, diagnose, design)
 """Command modules, in the order their commands are listed by ``--help``."""
@@ -33,14 +34,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+EXIT_INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT), as shells report it."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit code (2 on bad input, reported as one line)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log = logging.getLogger("montecarlo")
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except RunInterrupted as exc:
+        print(f"stopped: {exc}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except KeyboardInterrupt:
+        print("stopped: interrupted; nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        log.removeHandler(handler)
 
 
 def entry_point() -> None:

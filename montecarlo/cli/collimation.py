@@ -6,34 +6,33 @@ import argparse
 import json
 import math
 from collections.abc import Mapping
-from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from montecarlo.cli.common import (
     Parser,
+    finite,
     nonnegative,
+    nonnegative_int,
     positive,
+    write_provenance,
     write_text,
 )
 from montecarlo.errors import InputError
-from montecarlo.io.collimation_csv import MirrorData, read_mirror_csv, write_mirror_csv
-from montecarlo.io.files import save_figure
-from montecarlo.seed003.figures import pair_figures, paper_statements
-from montecarlo.seed003.fit import Fit, NotSeparable, consistency_angles, fit, min_mirrors
-from montecarlo.seed003.model import (
-    BASE_EFFECTS,
-    EFFECTS,
-    Noise,
-    correct_readings,
-    paper_layout,
-    parameter_names,
-    simulate_readings,
-)
+from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
+
+if TYPE_CHECKING:
+    from montecarlo.io.collimation_csv import MirrorData
+    from montecarlo.seed003.fit import Fit
 
 
 def _cmd_collimation_fit(args: argparse.Namespace) -> int:
+    from montecarlo.io.collimation_csv import read_mirror_csv
+    from montecarlo.seed003.fit import NotSeparable, fit, min_mirrors
+    from montecarlo.seed003.model import BASE_EFFECTS, parameter_names
+
+    if args.json:
+        writable_file(args.json)
     effects = BASE_EFFECTS + (("frame_misalignment",) if args.fit_frame_tilt else ())
     n = len(parameter_names(effects))
     readings = read_mirror_csv(args.data, min_mirrors(n), f"{n} parameters")
@@ -45,12 +44,22 @@ def _cmd_collimation_fit(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: {exc}") from None
     report = fit_report(readings, result, str(args.data))
     if args.json:
-        write_text(args.json, json.dumps(report, indent=2) + "\n")
+        from montecarlo.output.provenance import provenance
+
+        record = provenance("collimation fit", input=str(args.data),
+                            angle_sigma_arcsec=args.angle_sigma_arcsec, effects=list(effects))
+        write_text(args.json, json.dumps({**report, "provenance": record}, indent=2) + "\n")
     print(format_report(report))
     return 0
 
 
 def _cmd_collimation_simulate(args: argparse.Namespace) -> int:
+    from montecarlo.io.collimation_csv import MirrorData, write_mirror_csv
+    from montecarlo.seed003.model import Noise, paper_layout, simulate_readings
+
+    if args.n_azimuth + args.n_pitch == 0:
+        raise InputError("--n-azimuth, --n-pitch: no mirrors to simulate (both are 0)")
+    writable_file(args.out)
     az, el, sets = paper_layout(args.n_azimuth, args.n_pitch, math.radians(args.azimuth_span_deg),
                                 math.radians(args.pitch_span_deg))
     truth = {"axis_az": args.axis_az_arcsec * ARCSEC, "axis_el": args.axis_el_arcsec * ARCSEC,
@@ -71,10 +80,14 @@ def _cmd_collimation_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_collimation_figures(args: argparse.Namespace) -> int:
-    outdir = Path(args.outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
-    for name, fig in pair_figures().items():
-        print(f"wrote {save_figure(fig, outdir / f'{name}.png')}")
+    from montecarlo.io.files import save_figure
+    from montecarlo.seed003.figures import pair_figures, paper_statements
+
+    with OutputDir(args.outdir, "collimation figures") as staging:
+        for name, fig in pair_figures().items():
+            save_figure(fig, staging / f"{name}.png")
+        write_provenance(staging, "collimation figures")
+    print(f"wrote {args.outdir}/fig3.png ... fig6.png")
     print("seed 003, section 2 statements, evaluated with offsets of 0.1° (level mount):")
     for row in paper_statements():
         verdict = "holds" if row["holds"] else "DOES NOT HOLD"
@@ -98,14 +111,14 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = csub.add_parser("simulate", help="write a simulated calibration CSV")
     p.add_argument("out", help="CSV file to write")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--axis-az-arcsec", type=float, default=180.0)
-    p.add_argument("--axis-el-arcsec", type=float, default=180.0)
-    p.add_argument("--frame-heading-deg", type=float, default=30.0)
-    p.add_argument("--n-azimuth", type=int, default=5)
-    p.add_argument("--n-pitch", type=int, default=5)
-    p.add_argument("--azimuth-span-deg", type=float, default=90.0)
-    p.add_argument("--pitch-span-deg", type=float, default=60.0)
+    p.add_argument("--seed", type=nonnegative_int, default=0)
+    p.add_argument("--axis-az-arcsec", type=finite, default=180.0)
+    p.add_argument("--axis-el-arcsec", type=finite, default=180.0)
+    p.add_argument("--frame-heading-deg", type=finite, default=30.0)
+    p.add_argument("--n-azimuth", type=nonnegative_int, default=5)
+    p.add_argument("--n-pitch", type=nonnegative_int, default=5)
+    p.add_argument("--azimuth-span-deg", type=finite, default=90.0)
+    p.add_argument("--pitch-span-deg", type=finite, default=60.0)
     p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--ins-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--mount-roll-sigma-deg", type=nonnegative, default=0.0,
@@ -120,6 +133,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 def fit_report(readings: MirrorData, result: Fit, source: str) -> dict[str, object]:
     """JSON-ready summary of a fit: parameters, sigmas and residuals in arc-seconds."""
+    import numpy as np
+
+    from montecarlo.seed003.fit import consistency_angles
+    from montecarlo.seed003.model import EFFECTS, correct_readings
+
     roll = readings.ins_roll if readings.ins_roll is not None else np.zeros_like(readings.ins_az)
     params = result.params
     corr_az, corr_el, _ = correct_readings(readings.ins_az, readings.ins_el, roll,
@@ -163,6 +181,8 @@ def fit_report(readings: MirrorData, result: Fit, source: str) -> dict[str, obje
 
 def format_report(report: Mapping[str, object]) -> str:
     """Human-readable text of :func:`fit_report`."""
+    from montecarlo.seed003.model import EFFECTS
+
     p, se = report["parameters"], report["stderr"]
     sets = [m["set"] for m in report["mirrors"]]
     lines = [

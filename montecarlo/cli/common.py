@@ -87,3 +87,15 @@ def write_text(path: str | Path, text: str) -> None:
         atomic_write_bytes(path, text.encode())
     except OSError as exc:
         raise InputError(f"{path}: cannot write ({exc.strerror})") from None
+
+
+def write_provenance(directory: Path, kind: str, **record: object) -> None:
+    """``provenance.json`` of a command's result directory (marks it as ours, see OutputDir)."""
+    import json
+
+    from montecarlo.io.files import PROVENANCE
+    from montecarlo.output.provenance import provenance
+
+    atomic_write_bytes(Path(directory) / PROVENANCE,
+                       (json.dumps(provenance(kind, **record), indent=2, default=str) + "\n")
+                       .encode())

@@ -12,24 +12,21 @@ from montecarlo.cli.common import (
     nonnegative_int,
     positive,
     positive_int,
+    probability,
+    write_provenance,
 )
 from montecarlo.errors import InputError
+from montecarlo.io.files import OutputDir
 
 
 def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     """The base ground design (--study or the built-in one) and its [spec] table, if any."""
-    import tomllib
-
     from montecarlo.design import sizing_problem
+    from montecarlo.engine.study import read_study_file
 
     if args.study is None:
         return sizing_problem.DEFAULT_DESIGN, None
-    try:
-        raw = tomllib.loads(Path(args.study).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{args.study}: no such study file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{args.study}: not valid TOML: {exc}") from None
+    raw = read_study_file(args.study)
     return raw, raw.get("spec")
 
 
@@ -72,9 +69,15 @@ def _cmd_size(args: argparse.Namespace) -> int:
         replication_margin=not args.no_margin, order=order, n_jobs=args.n_jobs)
     confirm_seed = None if args.no_confirm else (
         args.confirm_seed if args.confirm_seed is not None else args.seed + 1)
-    result = sizing.size(problem, options, relations=args.relations, confirm_seed=confirm_seed)
     out = Path(args.out)
-    sizing_report.write_outputs(result, out)
+    with OutputDir(out, "size") as staging:
+        result = sizing.size(problem, options, relations=args.relations,
+                             confirm_seed=confirm_seed)
+        sizing_report.write_outputs(result, staging)
+        write_provenance(staging, "size", seed=args.seed, confirm_seed=confirm_seed,
+                         base_study=args.study, requirement=vars(problem.requirement),
+                         knobs=[vars(k) for k in knobs], relations=list(args.relations),
+                         trials=args.trials)
     print(sizing_report.format_result(result))
     print(f"\nwritten to {out}/ (report.md, frontier.png, answers.csv, grid-*.csv, corners-*.csv)")
     return 0
@@ -94,11 +97,16 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     points = _sizing_answers(args.from_sizing, args.relations) if args.from_sizing \
         else dict.fromkeys(args.relations, point)
     req = _requirement(args, spec)
-    results = [budget.budget(base, req, rel, pt, samples=args.samples, seed=args.seed,
-                             trials=args.trials, resamples=args.resamples, n_jobs=args.n_jobs)
-               for rel, pt in points.items()]
     out = Path(args.out)
-    budget_report.write_budget(results, out)
+    with OutputDir(out, "budget") as staging:
+        results = [budget.budget(base, req, rel, pt, samples=args.samples, seed=args.seed,
+                                 trials=args.trials, resamples=args.resamples,
+                                 n_jobs=args.n_jobs)
+                   for rel, pt in points.items()]
+        budget_report.write_budget(results, staging)
+        write_provenance(staging, "budget", seed=args.seed, base_study=args.study,
+                         requirement=vars(req), points=points, samples=args.samples,
+                         trials=args.trials, resamples=args.resamples)
     for r in results:
         print(budget_report.format_budget(r))
         print()
@@ -136,7 +144,7 @@ def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
                    help="percentile of the spec (default: [spec] or p95)")
     p.add_argument("--limit", type=positive, help="spec limit in the metric's display unit "
                    "(mrad for angles; default: the study's [spec])")
-    p.add_argument("--confidence", type=float, default=0.9,
+    p.add_argument("--confidence", type=probability, default=0.9,
                    help="confidence of the percentile bounds (default 0.9)")
     p.add_argument("--relations", nargs="+", choices=("common", "independent"),
                    default=["common", "independent"], help="pixel-noise relations (both)")

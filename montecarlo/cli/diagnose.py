@@ -5,48 +5,61 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    finite,
     nonnegative,
     nonnegative_int,
     positive,
     positive_int,
     probability,
+    write_provenance,
     write_text,
 )
-from montecarlo.discrepancy import collimation_effects as ce
-from montecarlo.discrepancy import ground_effects as ge
-from montecarlo.discrepancy import synth
-from montecarlo.discrepancy.engine import Diagnosis, diagnose
-from montecarlo.discrepancy.fit import FitError
-from montecarlo.discrepancy.view import SystemView, format_text, to_json
 from montecarlo.errors import InputError
-from montecarlo.geometry.camera import Camera
-from montecarlo.io.collimation_csv import read_mirror_csv, write_mirror_csv
-from montecarlo.io.ground_csv import GroundData, read_ground_csv, write_ground_csv
-from montecarlo.seed003.model import Noise
+from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
+
+if TYPE_CHECKING:
+    from montecarlo.discrepancy.engine import Diagnosis
+    from montecarlo.discrepancy.view import SystemView
 
 
 def _unit(unit: str) -> str:
     return "" if unit == "1" else f" {unit}"
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse, before any work, a --report directory or --json file that cannot be written."""
+    if args.report:
+        OutputDir(args.report, "diagnose").check()
+    if args.json:
+        writable_file(args.json)
+
+
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
                       source: str) -> int:
+    from montecarlo.discrepancy.view import format_text, to_json
+    from montecarlo.output.provenance import provenance
+
     report = to_json(d, view, source)
+    record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
     if args.report:
         from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
         from montecarlo.systems.discrepancy import monte_carlo_gap
 
-        mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
-            if args.trials > 0 else None
-        write_report(args.report, d, view, report, mc, args.trials, args.seed)
+        with OutputDir(args.report, "diagnose") as staging:
+            mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
+                if args.trials > 0 else None
+            write_report(staging, d, view, report, mc, args.trials, args.seed)
+            write_provenance(staging, "diagnose", **record)
     if args.json:
-        write_text(args.json, json.dumps(report, indent=2) + "\n")
+        write_text(args.json, json.dumps({**report, "provenance": provenance(
+            "diagnose", **record)}, indent=2) + "\n")
     print(format_text(report))
     if args.report:
         print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
@@ -55,7 +68,13 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
 
 
 def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
+    from montecarlo.discrepancy import ground_effects as ge
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.fit import FitError
+    from montecarlo.geometry.camera import Camera
+    from montecarlo.io.ground_csv import read_ground_csv
 
+    _check_outputs(args)
     try:
         camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
                                      args.pixels[1])
@@ -75,7 +94,12 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
+    from montecarlo.discrepancy import collimation_effects as ce
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.fit import FitError
+    from montecarlo.io.collimation_csv import read_mirror_csv
 
+    _check_outputs(args)
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
     sigma = args.angle_sigma_arcsec * ARCSEC
@@ -87,6 +111,11 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:
+
+    from montecarlo.discrepancy import ground_effects as ge
+    from montecarlo.discrepancy import synth
+    from montecarlo.geometry.camera import Camera
+    from montecarlo.io.ground_csv import GroundData, write_ground_csv
 
     try:
         camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
@@ -123,6 +152,10 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
 
 
 def _cmd_synth_collimation(args: argparse.Namespace) -> int:
+    from montecarlo.discrepancy import collimation_effects as ce
+    from montecarlo.discrepancy import synth
+    from montecarlo.io.collimation_csv import write_mirror_csv
+    from montecarlo.seed003.model import Noise
 
     candidates = {c.name: c for c in ce.CANDIDATES}
     effects = synth.parse_effects(args.effect, candidates, ce.display_unit)
@@ -209,7 +242,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pixels", type=positive_int, nargs=2, default=[512, 512])
     p.add_argument("--pixel-sigma", type=nonnegative, default=0.3, help="[px] (0.3)")
     p.add_argument("--survey-sigma-m", type=nonnegative, default=0.01, help="[m] (0.01)")
-    p.add_argument("--mounting-deg", type=float, nargs=3, default=[30.0, 20.0, 10.0],
+    p.add_argument("--mounting-deg", type=finite, nargs=3, default=[30.0, 20.0, 10.0],
                    metavar=("PSI", "THETA", "GAMMA"), help="true mounting (seed 000: 30 20 10)")
     p.add_argument("--ranges-m", type=positive, nargs="+", default=[50.0, 100.0])
     p.add_argument("--grid", type=positive_int, nargs=2, default=[6, 6],
@@ -228,9 +261,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     effect_options(p)
     p.add_argument("--n-azimuth", type=positive_int, default=7)
     p.add_argument("--n-pitch", type=positive_int, default=7)
-    p.add_argument("--azimuth-span-deg", type=float, default=90.0)
-    p.add_argument("--pitch-span-deg", type=float, default=60.0)
-    p.add_argument("--frame-heading-deg", type=float, default=30.0)
+    p.add_argument("--azimuth-span-deg", type=finite, default=90.0)
+    p.add_argument("--pitch-span-deg", type=finite, default=60.0)
+    p.add_argument("--frame-heading-deg", type=finite, default=30.0)
     p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--ins-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--mount-roll-sigma-deg", type=nonnegative, default=0.0)

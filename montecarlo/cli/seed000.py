@@ -7,6 +7,8 @@ import json
 import math
 
 from montecarlo.cli.common import (
+    finite,
+    nonnegative_int,
     positive_int,
 )
 from montecarlo.errors import InputError
@@ -56,7 +58,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     p.add_argument("--trials", type=positive_int, default=200_000,
                    help="Monte Carlo trials per reading (default 200000)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
     p.set_defaults(func=_cmd_air)
     _add_transfer_alignment_commands(sub)
 
@@ -86,15 +88,15 @@ def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     p.add_argument("--runs", type=positive_int, default=100,
                    help="Monte Carlo runs per IMU grade (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
     p.add_argument("--manoeuvre", default="s_turn",
                    help="flight profile: s_turn (default), wing_rock or level")
-    p.add_argument("--duration", type=float, default=120.0,
+    p.add_argument("--duration", type=finite, default=120.0,
                    help="alignment time [s] (default 120)")
-    p.add_argument("--bank", type=float, default=30.0,
+    p.add_argument("--bank", type=finite, default=30.0,
                    help="peak bank of the S-turn, roll amplitude of the wing rock [deg] "
                    "(default 30)")
-    p.add_argument("--period", type=float, default=60.0,
+    p.add_argument("--period", type=finite, default=60.0,
                    help="period of the S-turn or the wing rock [s] (default 60)")
     p.add_argument("--attitude-matching", action="store_true",
                    help="add attitude matching to velocity matching")

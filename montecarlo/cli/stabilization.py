@@ -10,18 +10,18 @@ import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    finite,
+    nonnegative_int,
+    positive,
+    positive_int,
 )
 from montecarlo.errors import InputError
-from montecarlo.geometry.camera import Camera
-from montecarlo.io.stabilization_csv import read_csv, write_csv
-from montecarlo.seed001.estimate import PARAMETER_NAMES, estimate
-from montecarlo.seed001.kinematics import Rocking
-from montecarlo.seed001.linear_model import OBSERVABLE_NAMES, observability
-from montecarlo.seed001.simulate import Setup, simulate
 from montecarlo.units import ARCMIN, DEG_PER_HOUR, DEG_PER_ROOT_HOUR
 
 
 def _stabilization_camera(args: argparse.Namespace):
+    from montecarlo.geometry.camera import Camera
+
     if not 0.0 < args.fov_deg < 180.0 or args.pixels <= 0:
         raise InputError(f"--fov-deg must be in (0, 180) and --pixels positive, got "
                          f"{args.fov_deg} and {args.pixels}")
@@ -29,6 +29,9 @@ def _stabilization_camera(args: argparse.Namespace):
 
 
 def _stabilization_setup(args: argparse.Namespace):
+    from montecarlo.seed001.kinematics import Rocking
+    from montecarlo.seed001.simulate import Setup
+
 
     if args.duration <= 0.0 or args.rate <= 0.0:
         raise InputError(f"--duration and --rate must be positive, got {args.duration} and "
@@ -44,6 +47,9 @@ def _stabilization_setup(args: argparse.Namespace):
 
 
 def _cmd_stabilization_simulate(args: argparse.Namespace) -> int:
+    from montecarlo.io.stabilization_csv import write_csv
+    from montecarlo.seed001.simulate import simulate
+
 
     rocking, setup = _stabilization_setup(args)
     delta_g = np.asarray(args.delta_g_arcmin) * ARCMIN
@@ -62,6 +68,9 @@ def _cmd_stabilization_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
+    from montecarlo.io.stabilization_csv import read_csv
+    from montecarlo.seed001.estimate import PARAMETER_NAMES, estimate
+
 
     if not 0.0 < args.forgetting <= 1.0 or args.passes < 1 or args.image_noise_px <= 0.0:
         raise InputError("--forgetting must be in (0, 1], --passes >= 1, --image-noise-px > 0")
@@ -100,6 +109,9 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
 
 
 def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
+    from montecarlo.seed001.linear_model import OBSERVABLE_NAMES, observability
+    from montecarlo.seed001.simulate import simulate
+
 
     rocking, setup = _stabilization_setup(args)
     record = simulate(rocking, dataclasses.replace(setup, gyro_noise=0.0), 0.0, 0.0)
@@ -118,27 +130,29 @@ def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
 
 
 def _add_stabilization_profile(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=float, default=60.0, help="run length [s] (60)")
-    p.add_argument("--rate", type=float, default=100.0,
+    p.add_argument("--duration", type=finite, default=60.0, help="run length [s] (60)")
+    p.add_argument("--rate", type=finite, default=100.0,
                    help="gyro, gimbal-loop and camera frame rate [Hz] (100)")
-    p.add_argument("--rock-amp-deg", type=float, nargs=3, default=[5.0, 5.0, 5.0],
+    p.add_argument("--rock-amp-deg", type=finite, nargs=3, default=[5.0, 5.0, 5.0],
                    metavar=("YAW", "PITCH", "ROLL"), help="rocking amplitudes [deg] (5 5 5)")
-    p.add_argument("--rock-freq-hz", type=float, nargs=3, default=[0.25, 0.4, 0.32],
+    p.add_argument("--rock-freq-hz", type=finite, nargs=3, default=[0.25, 0.4, 0.32],
                    metavar=("YAW", "PITCH", "ROLL"),
                    help="rocking frequencies [Hz] (0.25 0.4 0.32)")
-    p.add_argument("--rock-phase-deg", type=float, nargs=3, default=[0.0, 60.0, 120.0],
+    p.add_argument("--rock-phase-deg", type=finite, nargs=3, default=[0.0, 60.0, 120.0],
                    metavar=("YAW", "PITCH", "ROLL"), help="rocking phases [deg] (0 60 120)")
-    p.add_argument("--aim-deg", type=float, nargs=2, default=[20.0, 10.0],
+    p.add_argument("--aim-deg", type=finite, nargs=2, default=[20.0, 10.0],
                    metavar=("AZIMUTH", "PITCH"), help="gimbal angles at the start [deg] (20 10)")
-    p.add_argument("--image-noise-px", type=float, default=0.1,
+    p.add_argument("--image-noise-px", type=finite, default=0.1,
                    help="image noise per axis [px] (0.1)")
-    p.add_argument("--gyro-arw-deg-per-rt-h", type=float, default=0.01,
+    p.add_argument("--gyro-arw-deg-per-rt-h", type=finite, default=0.01,
                    help="gyro angle random walk [deg/sqrt(h)] (0.01)")
 
 
 def _add_stabilization_camera(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fov-deg", type=float, default=5.0, help="square field of view [deg] (5)")
-    p.add_argument("--pixels", type=int, default=1024, help="pixels across the image (1024)")
+    p.add_argument("--fov-deg", type=positive, default=5.0,
+                   help="square field of view [deg] (5)")
+    p.add_argument("--pixels", type=positive_int, default=1024,
+                   help="pixels across the image (1024)")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
@@ -151,25 +165,25 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                      "eps_rad, los_x_px, los_z_px)")
     _add_stabilization_profile(sim)
     _add_stabilization_camera(sim)
-    sim.add_argument("--delta-g-arcmin", type=float, nargs=3, default=[30.0, -18.0, 42.0],
+    sim.add_argument("--delta-g-arcmin", type=finite, nargs=3, default=[30.0, -18.0, 42.0],
                      metavar=("GX", "GY", "GZ"), help="IMU installation angles [arcmin]")
-    sim.add_argument("--delta-p-arcmin", type=float, nargs=3, default=[24.0, 0.0, -36.0],
+    sim.add_argument("--delta-p-arcmin", type=finite, nargs=3, default=[24.0, 0.0, -36.0],
                      metavar=("PX", "PY", "PZ"), help="camera installation angles [arcmin]")
-    sim.add_argument("--gyro-bias-deg-per-h", type=float, nargs=3, default=[0.0, 0.0, 0.0],
+    sim.add_argument("--gyro-bias-deg-per-h", type=finite, nargs=3, default=[0.0, 0.0, 0.0],
                      metavar=("X", "Y", "Z"), help="gyro biases [deg/h] (0 0 0)")
-    sim.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    sim.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (0)")
     sim.set_defaults(func=_cmd_stabilization_simulate)
 
     est = ssub.add_parser("estimate", help="estimate installation angles from a CSV run")
     est.add_argument("csv", help="CSV file with the columns written by 'simulate'")
     _add_stabilization_camera(est)
-    est.add_argument("--image-noise-px", type=float, default=0.1,
+    est.add_argument("--image-noise-px", type=finite, default=0.1,
                      help="image noise per axis [px] (0.1)")
-    est.add_argument("--gyro-arw-deg-per-rt-h", type=float, default=0.01,
+    est.add_argument("--gyro-arw-deg-per-rt-h", type=finite, default=0.01,
                      help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
-    est.add_argument("--forgetting", type=float, default=1.0,
+    est.add_argument("--forgetting", type=finite, default=1.0,
                      help="RLS forgetting factor in (0, 1] (1: none)")
-    est.add_argument("--passes", type=int, default=10,
+    est.add_argument("--passes", type=positive_int, default=10,
                      help="most RLS passes (1: the patent's single linear pass) (10)")
     est.add_argument("--json", action="store_true", help="print JSON instead of a table")
     est.set_defaults(func=_cmd_stabilization_estimate)

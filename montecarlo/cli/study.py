@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 from pathlib import Path
 
 from montecarlo.cli.common import (
@@ -13,23 +14,26 @@ from montecarlo.cli.common import (
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-
     from montecarlo.engine.checkpoints import Checkpoints
     from montecarlo.engine.runner import RunOptions, run_study
+    from montecarlo.io.files import OutputDir
     from montecarlo.systems import load_study
 
+    if args.quiet:
+        logging.getLogger("montecarlo").setLevel(logging.WARNING)
     study = load_study(args.study, trials=args.trials, seed=args.seed)
     out = Path(args.out) if args.out else Path("results") / study.header.name
     options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
                          chunk_size=args.chunk_size, progress=not args.quiet,
                          checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
-    result = run_study(study, options)
+    with OutputDir(out, "run", {"study": study.header.name}) as staging:
+        result = run_study(study, options)
+        from montecarlo.output.outputs import write_outputs  # matplotlib: only for results
 
-    from montecarlo.output.outputs import write_outputs  # matplotlib: only once results exist
+        write_outputs(result, staging, options)
+    Checkpoints(out.parent / ".checkpoints", study, args.reference).remove()
     from montecarlo.output.report import spec_verdicts
 
-    write_outputs(result, out, options)
-    Checkpoints(options.checkpoint_dir, study).remove()
     verdicts = spec_verdicts(result, result.to_frame())
     print(f"{study.header.name}: {len(study.points)} grid points written to {out}/ "
           f"(report.md, summary.csv, plots/)")
@@ -39,7 +43,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_nightly(args: argparse.Namespace) -> int:
-
     from montecarlo.tools.nightly import run_nightly
 
     passed, checks = run_nightly(Path(args.studies), Path(args.out), args.n_jobs,

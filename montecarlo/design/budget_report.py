@@ -138,7 +138,6 @@ def render_budget_report(results: Sequence[BudgetResult], figure_name: str = "bu
 def write_budget(results: Sequence[BudgetResult], out_dir: Path) -> list[Path]:
     """budget-<relation>.csv, budget.png and report.md, each written atomically."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for name, data in [*((f"budget-{r.relation}.csv", r.table.to_csv().encode())
                          for r in results),

@@ -31,10 +31,8 @@ from __future__ import annotations
 
 import copy
 import math
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -346,9 +344,7 @@ def run_statistic(study: Any, requirement: Requirement, n_jobs: int = 2) -> pd.D
     statistic ``value``, its interval ``lo``/``hi`` (display unit), ``count``, ``invalid``, the
     ``verdict`` and ``margin_ok`` (meets with the replication margin)."""
     req = requirement
-    with tempfile.TemporaryDirectory(prefix="montecarlo-sizing-") as tmp:
-        result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False,
-                                             checkpoint_dir=Path(tmp)))
+    result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False))
     frame = result.to_frame()
     sel = frame[(frame["metric"] == req.metric) & (frame["variant"] == req.variant)]
     sel = sel.sort_values("point")

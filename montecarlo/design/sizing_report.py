@@ -227,7 +227,6 @@ def write_outputs(result: SizingResult, out_dir: Path) -> list[Path]:
     """grid-<relation>.csv, corners-<relation>.csv, answers.csv, frontier.png, report.md; each
     file written under a temporary name and renamed."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     written = []
 
     def put(name: str, data: bytes) -> None:

@@ -2,9 +2,10 @@
 
 Memory does not grow with the number of trials: each metric keeps
 
-* per block of trials, its count, mean and sum of squared deviations (``n, mean, m2``); the
-  totals combine these with ``math.fsum``, which rounds the exact sum once, so the result does
-  not depend on the order or grouping in which blocks arrived;
+* its count, mean and sum of squared deviations (``n, mean, m2``), combined block after block in
+  block order with Chan's formula, so the result does not depend on how blocks were grouped
+  into tasks or in which order they arrived; blocks that arrive early wait until the ones before
+  them are in (a window of about the tasks in flight);
 * the minimum and maximum;
 * an integer histogram on a logarithmic grid (1024 bins per octave, relative width 2**-10,
   from 2**-40 to 2**16 in magnitude, both signs), from which percentiles are read to within half
@@ -15,6 +16,10 @@ distribution-free confidence intervals are order statistics ``[X_(r), X_(s)]`` w
 from the binomial distribution of the number of trials below the true percentile; the interval
 ends are read conservatively (outer bin edges), so the coverage is at least the nominal level.
 Where too few trials exist for an interval end, it is NaN: more trials are needed.
+
+A trial without a value (an invalid geometry, a fit that failed) is counted, never dropped: the
+summary gives the fraction of such trials, and a spec verdict treats them as larger than any
+limit (a calibration that cannot be solved is a failed calibration).
 """
 
 from __future__ import annotations
@@ -46,6 +51,8 @@ PERCENTILE_TAGS = tuple(f"p{round(100 * p)}" for p in PERCENTILES)
 VALUE_COLUMNS = ["mean", "std", *(f"{t}{e}" for t in PERCENTILE_TAGS for e in ("", "_lo", "_hi")),
                  "max"]
 """Summary columns that carry values in the metric's unit (the rest are counts and labels)."""
+SPEC_COLUMNS = ["spec_value", "spec_lo", "spec_hi"]
+"""Summary columns of a spec's statistic over all trials, in the metric's unit."""
 
 
 def bin_index(x: np.ndarray) -> np.ndarray:
@@ -112,11 +119,30 @@ COARSE_SHIFT = 5
 """Plots get 2**(MANTISSA_BITS - COARSE_SHIFT) = 32 bins per octave (3 % wide)."""
 
 
+Moments = tuple[int, float, float]
+"""(count, mean, sum of squared deviations) of some values."""
+
+
+def combine(a: Moments, b: Moments) -> Moments:
+    """Moments of the union of two sets of values (Chan, Golub and LeVeque, 1979)."""
+    n = a[0] + b[0]
+    if a[0] == 0 or b[0] == 0:
+        return a if b[0] == 0 else b
+    delta = b[1] - a[1]
+    return n, a[1] + delta * b[0] / n, a[2] + b[2] + delta * delta * a[0] * b[0] / n
+
+
 @dataclass
 class MetricStats:
-    """Streaming statistics of one metric while its grid point is being computed."""
+    """Streaming statistics of one metric while its grid point is being computed.
 
-    blocks: dict[int, tuple[int, float, float]] = field(default_factory=dict)
+    ``folded`` holds the moments of blocks ``0 .. next_block - 1``; ``pending`` the blocks that
+    arrived before a block ahead of them.
+    """
+
+    pending: dict[int, Moments] = field(default_factory=dict)
+    folded: Moments = (0, 0.0, 0.0)
+    next_block: int = 0
     minimum: float = math.inf
     maximum: float = -math.inf
     hist: np.ndarray = field(default_factory=lambda: np.zeros(N_BINS, np.int64))
@@ -132,42 +158,59 @@ class MetricStats:
         hist[nz] = counts
         self.__dict__.update({**state, "hist": hist})
 
+    def add_moments(self, block: int, moments: Moments) -> None:
+        """Add the moments of one block of valid values (count 0 for a block without any)."""
+        if block < self.next_block or block in self.pending:
+            raise ValueError(f"block {block} added twice")
+        self.pending[block] = moments
+        self._fold()
+
+    def _fold(self) -> None:
+        while self.next_block in self.pending:
+            self.folded = combine(self.folded, self.pending.pop(self.next_block))
+            self.next_block += 1
+
     def add_block(self, block: int, values: np.ndarray) -> None:
-        """Add the finite values of one block (NaN marks an invalid trial and is skipped)."""
+        """Add the finite values of one block (NaN marks a trial without a value, skipped)."""
         x = values[np.isfinite(values)]
         if x.size:
             mean = float(np.mean(x))
-            self.blocks[block] = (x.size, mean, float(np.sum((x - mean) ** 2)))
+            self.add_moments(block, (x.size, mean, float(np.sum((x - mean) ** 2))))
             self.minimum = min(self.minimum, float(x.min()))
             self.maximum = max(self.maximum, float(x.max()))
             self.hist += np.bincount(bin_index(x), minlength=N_BINS)
         else:
-            self.blocks[block] = (0, 0.0, 0.0)
+            self.add_moments(block, (0, 0.0, 0.0))
 
     def merge(self, other: MetricStats) -> None:
         """Add another accumulator's blocks (blocks must not overlap)."""
-        overlap = self.blocks.keys() & other.blocks.keys()
-        if overlap:
-            raise ValueError(f"blocks {sorted(overlap)} merged twice")
-        self.blocks.update(other.blocks)
+        if other.next_block:
+            if self.next_block or any(b < other.next_block for b in self.pending):
+                raise ValueError(f"blocks below {other.next_block} added twice")
+            self.folded, self.next_block = other.folded, other.next_block
+            self._fold()
+        for b, m in sorted(other.pending.items()):
+            self.add_moments(b, m)
         self.minimum = min(self.minimum, other.minimum)
         self.maximum = max(self.maximum, other.maximum)
         self.hist += other.hist
 
+    def moments(self) -> Moments:
+        """Moments of every block added, combined in block order."""
+        out = self.folded
+        for _, m in sorted(self.pending.items()):
+            out = combine(out, m)
+        return out
+
     @property
     def count(self) -> int:
-        return sum(n for n, _, _ in self.blocks.values())
+        return self.moments()[0]
 
     def mean_std(self) -> tuple[float, float]:
-        n = self.count
+        n, mean, m2 = self.moments()
         if n == 0:
             return math.nan, math.nan
-        mean = math.fsum(b[0] * b[1] for b in self.blocks.values()) / n
-        if n == 1:
-            return mean, math.nan
-        m2 = math.fsum(b[2] for b in self.blocks.values()) + math.fsum(
-            b[0] * (b[1] - mean) ** 2 for b in self.blocks.values())
-        return mean, math.sqrt(m2 / (n - 1))
+        return mean, math.sqrt(m2 / (n - 1)) if n > 1 else math.nan
 
     def value_range(self, of_abs: bool) -> tuple[float, float]:
         """Smallest and largest value (or magnitude)."""
@@ -178,9 +221,15 @@ class MetricStats:
                                                                   abs(self.maximum))
         return lo, hi
 
-    def quantile(self, p: float, of_abs: bool, confidence: float) -> tuple[float, float, float]:
-        """(estimate, lower, upper) of the p-quantile of the values or of their magnitudes."""
-        n = self.count
+    def quantile(self, p: float, of_abs: bool, confidence: float, censored: int = 0
+                 ) -> tuple[float, float, float]:
+        """(estimate, lower, upper) of the p-quantile of the values or of their magnitudes.
+
+        ``censored`` trials without a value count as larger than every value: a rank that
+        falls among them gives +inf.
+        """
+        count = self.count
+        n = count + censored
         if n == 0:
             return math.nan, math.nan, math.nan
         if of_abs:
@@ -190,14 +239,22 @@ class MetricStats:
         lo_val, hi_val = self.value_range(of_abs)
         cum = np.cumsum(counts)
 
-        def bin_of(rank: int) -> int:
-            return int(np.searchsorted(cum, rank))
+        def lower_edge(rank: int) -> float:
+            return float(max(lower[np.searchsorted(cum, rank)], lo_val)) \
+                if rank <= count else math.inf
+
+        def upper_edge(rank: int) -> float:
+            return float(min(upper[np.searchsorted(cum, rank)], hi_val)) \
+                if rank <= count else math.inf
 
         k, r, s = order_statistic_ranks(n, p, confidence)
-        b = bin_of(k)
-        est = float(np.clip(0.5 * (lower[b] + upper[b]), lo_val, hi_val))
-        lo = float(max(lower[bin_of(r)], lo_val)) if r >= 1 else math.nan
-        hi = float(min(upper[bin_of(s)], hi_val)) if s <= n else math.nan
+        if k <= count:
+            b = int(np.searchsorted(cum, k))
+            est = float(np.clip(0.5 * (lower[b] + upper[b]), lo_val, hi_val))
+        else:
+            est = math.inf
+        lo = lower_edge(r) if r >= 1 else math.nan
+        hi = upper_edge(s) if s <= n else math.nan
         return est, lo, hi
 
     def coarse_histogram(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,17 +281,38 @@ class PointResult:
     histograms: dict[tuple[str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
+@dataclass(frozen=True)
+class SpecCheck:
+    """A requirement judged on every matching summary row: ``statistic`` of ``metric``
+    (of ``variant``, or of every variant if None) at most ``limit`` [SI units, radians]."""
+
+    metric: str
+    variant: str | None
+    statistic: str
+    limit: float
+
+    def applies(self, variant: str, metric: str) -> bool:
+        return metric == self.metric and self.variant in (None, variant)
+
+
+VERDICTS = ("meets", "fails", "undecided")
+"""Spec verdicts: the whole confidence interval of the statistic below the limit, the whole
+interval above it, or neither (more trials would decide)."""
+
+
 @dataclass
 class PointStats:
     """All metrics and invalid counts of one grid point, while it is being computed.
 
     ``metrics`` is keyed by (variant, metric); ``invalid`` by variant, holding the count of
-    invalid trials per reason name plus ``"total"``.
+    invalid trials per reason name plus ``"total"``; ``trials`` counts every trial added, with
+    or without a value, and ``blocks`` the blocks added.
     """
 
     metrics: dict[tuple[str, str], MetricStats] = field(default_factory=dict)
     invalid: dict[str, dict[str, int]] = field(default_factory=dict)
-    blocks: set[int] = field(default_factory=set)
+    trials: int = 0
+    blocks: int = 0
     hist_matrix: np.ndarray | None = None
     """Set by a fast kernel: the histograms of all metrics as rows of one matrix (each
     MetricStats.hist is a view of its row). Not pickled: each metric pickles its own row."""
@@ -243,11 +321,11 @@ class PointStats:
         return {**self.__dict__, "hist_matrix": None}
 
     def add_block(self, block: int, values: dict[tuple[str, str], np.ndarray],
-                  invalid: dict[str, dict[str, int]]) -> None:
-        """Add one block of per-trial values (NaN = invalid) and its invalid counts."""
+                  invalid: dict[str, dict[str, int]], n: int) -> None:
+        """Add one block of ``n`` trials: per-trial values (NaN = no value), invalid counts."""
         for key, v in values.items():
             self.metrics.setdefault(key, MetricStats()).add_block(block, v)
-        self.add_block_summary(block, {}, invalid)
+        self.add_block_summary(block, {}, invalid, n)
 
     def histogram_matrix(self, keys: list[tuple[str, str]], wanted: set[tuple[str, str]]
                          ) -> np.ndarray:
@@ -265,8 +343,8 @@ class PointStats:
 
     def add_block_summary(self, block: int,
                           moments: dict[tuple[str, str], tuple[int, float, float, float, float]],
-                          invalid: dict[str, dict[str, int]]) -> None:
-        """Add one block already reduced by a fused kernel.
+                          invalid: dict[str, dict[str, int]], n: int) -> None:
+        """Add one block of ``n`` trials already reduced by a fused kernel.
 
         ``moments[key] = (count, mean, m2, minimum, maximum)`` of the key's valid values, whose
         histogram the kernel has added to :meth:`histogram_matrix`; ``invalid[variant]`` maps
@@ -274,14 +352,19 @@ class PointStats:
         """
         for key, (count, mean, m2, lo, hi) in moments.items():
             ms = self.metrics.setdefault(key, MetricStats())
-            ms.blocks[block] = (int(count), float(mean), float(m2)) if count else (0, 0.0, 0.0)
+            ms.add_moments(block, (int(count), float(mean), float(m2)) if count
+                           else (0, 0.0, 0.0))
             ms.minimum = min(ms.minimum, float(lo))
             ms.maximum = max(ms.maximum, float(hi))
+        self._add_counts(invalid, n, 1)
+
+    def _add_counts(self, invalid: dict[str, dict[str, int]], trials: int, blocks: int) -> None:
         for variant, counts in invalid.items():
             mine = self.invalid.setdefault(variant, {})
             for reason, c in counts.items():
                 mine[reason] = mine.get(reason, 0) + c
-        self.blocks.add(block)
+        self.trials += trials
+        self.blocks += blocks
 
     def merge(self, other: PointStats) -> None:
         for key, m in other.metrics.items():
@@ -289,17 +372,18 @@ class PointStats:
                 self.metrics[key].merge(m)
             else:
                 self.metrics[key] = m
-        for variant, counts in other.invalid.items():
-            mine = self.invalid.setdefault(variant, {})
-            for reason, c in counts.items():
-                mine[reason] = mine.get(reason, 0) + c
-        self.blocks |= other.blocks
+        self._add_counts(other.invalid, other.trials, other.blocks)
 
-    def summary(self, signed: dict[str, bool], confidence: float) -> pd.DataFrame:
+    def summary(self, signed: dict[str, bool], confidence: float,
+                spec: SpecCheck | None = None) -> pd.DataFrame:
         """One row per (variant, metric): counts, moments, percentiles with intervals, max.
 
         ``signed[metric]`` True means percentiles and max are of the magnitude |x| (the mean and
-        std stay signed), recorded in the column ``percentiles_of``.
+        std stay signed), recorded in the column ``percentiles_of``. Moments, percentiles and
+        max are over the trials with a value (``percentiles_over = "valid"``); a trial without
+        one is counted in ``invalid_fraction``. Rows the ``spec`` applies to get ``spec_value``,
+        ``spec_lo``, ``spec_hi`` (the statistic over all trials, those without a value counted
+        as +inf) and a ``verdict`` (:data:`VERDICTS`).
         """
         import pandas as pd
 
@@ -308,19 +392,45 @@ class PointStats:
             of_abs = signed[metric]
             mean, std = m.mean_std()
             inv = self.invalid.get(variant, {})
+            count = m.count
             row = {"variant": variant, "metric": metric,
-                   "percentiles_of": "abs" if of_abs else "value",
-                   "count": m.count, "invalid": inv.get("total", 0),
+                   "percentiles_of": "abs" if of_abs else "value", "percentiles_over": "valid",
+                   "trials": self.trials, "count": count, "invalid": inv.get("total", 0),
+                   "invalid_fraction": (self.trials - count) / self.trials if self.trials
+                   else math.nan,
                    **{f"invalid_{k}": v for k, v in sorted(inv.items()) if k != "total"},
                    "mean": mean, "std": std}
             for p, tag in zip(PERCENTILES, PERCENTILE_TAGS, strict=True):
                 est, lo, hi = m.quantile(p, of_abs, confidence)
                 row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
-            row["max"] = m.value_range(of_abs)[1] if m.count else math.nan
+            row["max"] = m.value_range(of_abs)[1] if count else math.nan
+            if spec is not None and spec.applies(variant, metric):
+                row.update(self._judge(m, row, spec, of_abs, confidence))
             rows.append(row)
         return pd.DataFrame(rows)
 
-    def finalize(self, signed: dict[str, bool], confidence: float) -> PointResult:
+    def _judge(self, m: MetricStats, row: dict, spec: SpecCheck, of_abs: bool,
+               confidence: float) -> dict[str, float | str]:
+        """The spec's statistic over all trials (no value = +inf) and the verdict."""
+        censored = self.trials - m.count
+        stat = spec.statistic
+        if stat.startswith("p"):
+            value, lo, hi = m.quantile(int(stat[1:]) / 100.0, of_abs, confidence, censored)
+        else:  # mean, std, max: no interval; any trial without a value fails the spec
+            value = math.inf if censored else row[stat]
+            lo = hi = value
+        if math.isnan(value) and censored == 0:  # no trials
+            verdict = "undecided"
+        elif not math.isnan(hi) and hi <= spec.limit:
+            verdict = "meets"
+        elif not math.isnan(lo) and lo > spec.limit:
+            verdict = "fails"
+        else:
+            verdict = "undecided"
+        return {"spec_value": value, "spec_lo": lo, "spec_hi": hi, "verdict": verdict}
+
+    def finalize(self, signed: dict[str, bool], confidence: float,
+                 spec: SpecCheck | None = None) -> PointResult:
         """The compact result of a finished point (the dense histograms are dropped)."""
-        return PointResult(self.summary(signed, confidence),
+        return PointResult(self.summary(signed, confidence, spec),
                            {k: m.coarse_histogram() for k, m in self.metrics.items()})

@@ -1,12 +1,17 @@
 """Checkpoints of a study run: each finished grid point saved, so a rerun resumes.
 
-Each finished grid point is pickled, written atomically, under
-``<root>/<name>-<hash>-v<version>-f<format>/point-NNNNNN.pkl``.
+Each finished grid point is pickled, written atomically, under ``<root>/<name>-<key>/``. The key
+covers everything that changes the numbers: the study (its hash), the package's source code
+(a fingerprint of every module) and the options that select an implementation (``reference``).
+A rerun after any of them changed starts afresh instead of mixing results.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
+import json
 import pickle
 import shutil
 from pathlib import Path
@@ -16,19 +21,28 @@ from montecarlo.engine.aggregate import PointResult
 from montecarlo.engine.study import Study
 from montecarlo.io.files import atomic_write_bytes
 
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """SHA-256 of the package's source: every module's path and text."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
 
 
 class Checkpoints:
-    """Finished grid points of one study, one pickle file each.
+    """Finished grid points of one study, one pickle file each, under ``root``."""
 
-    The directory name carries the study hash, the package version and the checkpoint format,
-    so a changed study or package never resumes from another's checkpoints.
-    """
-
-    def __init__(self, root: Path, study: Study):
-        tag = f"{study.hash()[:16]}-v{__version__}-f{CHECKPOINT_FORMAT}"
-        self.dir = root / f"{study.header.name}-{tag}"
+    def __init__(self, root: Path, study: Study, reference: bool = False):
+        key = {"study": study.hash(), "code": code_fingerprint(), "version": __version__,
+               "format": CHECKPOINT_FORMAT, "reference": reference}
+        digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
+        self.key = key
+        self.dir = root / f"{study.header.name}-{digest[:16]}"
 
     def _file(self, point: int) -> Path:
         return self.dir / f"point-{point:06d}.pkl"

@@ -4,22 +4,27 @@ Reproducibility contract: trials are grouped into fixed *blocks* (``block_size``
 of the study); every block draws from its own streams (``SeedSequence(seed)`` with spawn key
 ``(block, source)``, or ``(point, block, source)`` without common random numbers). A *task* is
 a run of consecutive blocks of one grid point; tasks may be any multiple of the block size, run
-in any order, on any worker or backend. Statistics are merged exactly (see
-:mod:`montecarlo.engine.aggregate`), so results are bit-identical for any ``n_jobs``, chunk size and
-backend, on machines of one CPU type (numpy's and numba's SIMD code paths depend on it).
+in any order, on any worker or backend. Statistics are combined in block order (see
+:mod:`montecarlo.engine.aggregate`), so results are bit-identical for any ``n_jobs``, chunk size
+and backend, on machines of one CPU type (numpy's and numba's SIMD code paths depend on it).
 
-Each finished grid point is checkpointed (pickle, written atomically) under
-``<out>/../.checkpoints/<name>-<hash>/``; rerunning an interrupted study skips finished points
-and ends with the same results as an uninterrupted run.
+With a checkpoint directory, each finished grid point is saved (:mod:`.checkpoints`); rerunning
+an interrupted study skips finished points and ends with the same results as an uninterrupted
+run. Tasks are generated as they are needed, so memory does not grow with the trial count.
 """
 
 from __future__ import annotations
 
+import _thread
 import contextlib
+import logging
 import math
-import sys
+import os
+import re
+import threading
+import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -28,13 +33,20 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from montecarlo.engine.aggregate import VALUE_COLUMNS, PointResult, PointStats
+from montecarlo.engine.aggregate import (
+    SPEC_COLUMNS,
+    VALUE_COLUMNS,
+    PointResult,
+    PointStats,
+    SpecCheck,
+)
 from montecarlo.engine.checkpoints import Checkpoints
 from montecarlo.engine.study import Study
 from montecarlo.engine.tasks import PointTask, run_task
-from montecarlo.errors import InputError
+from montecarlo.errors import InputError, RunInterrupted
 
 Backend = Literal["loky", "dask"]
+log = logging.getLogger("montecarlo")
 
 
 @dataclass(frozen=True)
@@ -48,6 +60,7 @@ class RunOptions:
     """Trials per task, a multiple of the block size (default: about 4 tasks per worker)."""
     progress: bool = True
     checkpoint_dir: Path | None = None
+    """Save each finished grid point here and resume from it; None: no checkpoints."""
     reference: bool = False
     """Use the literal reference implementation instead of a system's fast kernel (slower;
     the statistics agree to about 1e-12, not bit for bit)."""
@@ -60,6 +73,8 @@ class StudyResult:
     study: Study
     points: list[PointResult]
     trials: dict[int, pd.DataFrame] = field(default_factory=dict)
+    resumed: dict[str, Any] = field(default_factory=dict)
+    """Grid points taken from checkpoints (``points``) and where (``from``, ``key``)."""
 
     def _sweep_value(self, key: str, value: Any) -> Any:
         """Sweep values as they go in a column: text if the key mixes numbers and text."""
@@ -72,7 +87,8 @@ class StudyResult:
         for gp, pr in zip(self.study.points, self.points, strict=True):
             df = pr.summary.copy()
             scale = df["metric"].map({m.name: m.scale for _, m in self.study.metrics})
-            df[VALUE_COLUMNS] = df[VALUE_COLUMNS].mul(scale, axis=0)
+            values = [c for c in (*VALUE_COLUMNS, *SPEC_COLUMNS) if c in df.columns]
+            df[values] = df[values].mul(scale, axis=0)
             df.insert(0, "point", gp.index)
             for i, key in enumerate(self.study.sweep_keys):
                 df.insert(1 + i, key, self._sweep_value(key, gp.values[key]))
@@ -80,18 +96,18 @@ class StudyResult:
                       df["metric"].map({m.name: m.unit for _, m in self.study.metrics}))
             frames.append(df)
         out = pd.concat(frames, ignore_index=True)
-        invalid_cols = [c for c in out.columns if c.startswith("invalid_")]
+        invalid_cols = [c for c in out.columns
+                        if c.startswith("invalid_") and c != "invalid_fraction"]
         out[invalid_cols] = out[invalid_cols].fillna(0).astype(np.int64)
         return out
 
 
-def _tasks(study: Study, points: list[int], chunk_blocks: int) -> list[tuple[int, range]]:
-    tasks = []
+def _tasks(study: Study, points: list[int], chunk_blocks: int) -> Iterator[tuple[int, range]]:
+    """The tasks, generated as the runner asks for them."""
     for p in points:
         n_blocks = _n_blocks(study, p)
-        tasks += [(p, range(s, min(s + chunk_blocks, n_blocks)))
-                  for s in range(0, n_blocks, chunk_blocks)]
-    return tasks
+        for s in range(0, n_blocks, chunk_blocks):
+            yield p, range(s, min(s + chunk_blocks, n_blocks))
 
 
 def _n_blocks(study: Study, point: int) -> int:
@@ -108,39 +124,75 @@ MAX_CHUNK_BLOCKS = 32
 
 def _chunk_blocks(study: Study, points: list[int], options: RunOptions) -> int:
     """Blocks per task: the requested chunk size, or about four tasks per worker."""
-    bs = study.block_size
     if options.chunk_size is not None:
-        if options.chunk_size <= 0 or options.chunk_size % bs:
-            raise InputError(f"--chunk-size: {options.chunk_size} is not a positive multiple of "
-                             f"the study's block size {bs}")
-        return options.chunk_size // bs
+        return options.chunk_size // study.block_size
     total_blocks = sum(_n_blocks(study, p) for p in points)
     return min(MAX_CHUNK_BLOCKS, max(1, math.ceil(total_blocks / (4 * options.n_jobs))))
 
 
+def available_cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ucx)://)?[\w.\-\[\]:]+:\d{1,5}$")
+"""What a dask scheduler address looks like: ``[tcp://]host:port``."""
+
+WORKER_WAIT = 30.0
+"""Seconds a dask run waits with no worker before it gives up [s]."""
+
+
+def _watch_workers(client: Any, stop: threading.Event, gone: list[str]) -> None:
+    """Interrupt the main thread if the cluster has had no worker for :data:`WORKER_WAIT`."""
+    since = None
+    while not stop.wait(2.0):
+        try:
+            workers = client.scheduler_info().get("workers", {})
+        except Exception:  # scheduler unreachable: no worker either
+            workers = {}
+        if workers:
+            since = None
+            continue
+        since = since or time.monotonic()
+        if time.monotonic() - since > WORKER_WAIT:
+            gone.append(f"no dask worker for {WORKER_WAIT:.0f} s")
+            _thread.interrupt_main()
+            return
+
+
 @contextlib.contextmanager
-def _backend(options: RunOptions) -> Iterator[int]:
+def _backend(options: RunOptions, gone: list[str]) -> Iterator[int]:
     """Context in which joblib uses the requested backend; yields n_jobs for Parallel."""
     if options.backend == "loky":
-        if options.scheduler:
-            raise InputError("--scheduler: only meaningful with --backend dask")
         with joblib.parallel_config(backend="loky", inner_max_num_threads=1):
             yield options.n_jobs
         return
     from distributed import Client, LocalCluster
 
     if options.scheduler:
+        address = options.scheduler
         try:
-            client = Client(options.scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"--scheduler: cannot reach {options.scheduler!r} ({exc})") from None
-        with client, joblib.parallel_config(backend="dask"):
+            client = Client(address, timeout="10s")
+        except Exception as exc:  # refused, timed out, or not speaking dask at all
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise InputError(f"--scheduler: no dask scheduler answers at {address!r} "
+                             f"({reason[:120]})") from None
+        cluster: Any = contextlib.nullcontext()
+    else:
+        cluster = LocalCluster(n_workers=options.n_jobs, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    stop = threading.Event()
+    watcher = threading.Thread(target=_watch_workers, args=(client, stop, gone), daemon=True)
+    with cluster, client, joblib.parallel_config(backend="dask"):
+        watcher.start()
+        try:
             yield -1
-        return
-    with LocalCluster(n_workers=options.n_jobs, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster), \
-            joblib.parallel_config(backend="dask"):
-        yield -1
+        finally:
+            stop.set()
 
 
 def _trials_frame(study: Study, point: int, kept: dict[int, dict]) -> pd.DataFrame:
@@ -153,56 +205,131 @@ def _trials_frame(study: Study, point: int, kept: dict[int, dict]) -> pd.DataFra
     return pd.DataFrame({"point": point, "trial": trial, **cols})
 
 
-def run_study(study: Study, options: RunOptions = RunOptions(),
-              on_point: Callable[[int], Any] | None = None) -> StudyResult:
-    """Run every grid point of ``study`` (resuming from checkpoints) and return the statistics."""
+def _checked_options(study: Study, options: RunOptions) -> RunOptions:
+    """Options checked before any work; local workers capped at the cores (one line says so).
+
+    Raises
+    ------
+    InputError
+        ``n_jobs < 1``, a scheduler without the dask backend or not shaped like an address,
+        or a chunk size that is not a multiple of the study's block size.
+    """
     if options.n_jobs < 1:
         raise InputError(f"--n-jobs: must be at least 1 (got {options.n_jobs})")
-    root = Path(options.checkpoint_dir or Path("results") / ".checkpoints")
-    checkpoints = Checkpoints(root, study)
+    if options.scheduler is not None:
+        if options.backend != "dask":
+            raise InputError("--scheduler: only meaningful with --backend dask")
+        if not SCHEDULER_ADDRESS.match(options.scheduler):
+            raise InputError(f"--scheduler: {options.scheduler!r} is not a dask scheduler "
+                             "address (expected tcp://HOST:PORT)")
+    bs = study.block_size
+    if options.chunk_size is not None and (options.chunk_size <= 0 or options.chunk_size % bs):
+        raise InputError(f"--chunk-size: {options.chunk_size} is not a positive multiple of "
+                         f"the study's block size {bs}")
+    cores = available_cores()
+    if options.scheduler is None and options.n_jobs > cores:
+        log.info("--n-jobs %d: this machine has %d cores; using %d workers",
+                 options.n_jobs, cores, cores)
+        return replace(options, n_jobs=cores)
+    return options
+
+
+ESTIMATE_AFTER = 5.0
+"""Seconds of running after which the remaining time of a long run is announced [s]."""
+
+
+def run_study(study: Study, options: RunOptions = RunOptions(),
+              on_point: Callable[[int], Any] | None = None) -> StudyResult:
+    """Run every grid point of ``study`` (resuming from checkpoints) and return the statistics.
+
+    Raises
+    ------
+    RunInterrupted
+        Ctrl-C, or a dask cluster without workers; finished points stay checkpointed.
+    """
+    options = _checked_options(study, options)
+    checkpoints = None if options.checkpoint_dir is None else \
+        Checkpoints(Path(options.checkpoint_dir), study, options.reference)
     keep = study.header.per_trial
     done: dict[int, tuple[PointResult, dict]] = {}
-    for gp in study.points:
-        loaded = checkpoints.load(gp.index)
-        if loaded is not None:
-            done[gp.index] = loaded
+    if checkpoints is not None:
+        for gp in study.points:
+            loaded = checkpoints.load(gp.index)
+            if loaded is not None:
+                done[gp.index] = loaded
+    resumed = sorted(done)
     todo = [gp.index for gp in study.points if gp.index not in done]
-    if done:
-        print(f"{study.header.name}: resuming, {len(done)} of {len(study.points)} grid points "
-              f"already computed ({checkpoints.dir})", file=sys.stderr)
+    if checkpoints is not None and done:
+        log.warning("%s: resuming, %d of %d grid points already computed (%s)",
+                 study.header.name, len(done), len(study.points), checkpoints.dir)
     chunk_blocks = _chunk_blocks(study, todo, options) if todo else 1
-    tasks = _tasks(study, todo, chunk_blocks)
     remaining = {p: _n_blocks(study, p) for p in todo}
     partial: dict[int, tuple[PointStats, dict]] = {p: (PointStats(), {}) for p in todo}
 
     signed = {m.name: m.signed for _, m in study.metrics}
+    spec = study.spec
+    check = None if spec is None else SpecCheck(spec.metric, spec.variant, spec.statistic,
+                                                spec.limit / study.metric(spec.metric).scale)
     h = study.header
     point_tasks = {p: PointTask(study.system, study.points[p].prepared, h.seed, p,
                                 h.common_random_numbers, study.block_size, study.points[p].trials)
                    for p in todo}
     total = sum(study.points[p].trials for p in todo)
-    bar = tqdm(total=total, unit="trial", unit_scale=True, file=sys.stderr, dynamic_ncols=True,
-               disable=not options.progress or not tasks,
+    if todo:
+        log.info("%s: %d of %d grid points to run, %s trials", h.name, len(todo),
+                 len(study.points), f"{total:,}")
+    bar = tqdm(total=total, unit="trial", unit_scale=True, dynamic_ncols=True,
+               disable=not options.progress or not todo,
                desc=f"{study.header.name}: {len(todo)}/{len(study.points)} points")
-    with bar:
-        if tasks:
-            with _backend(options) as n_jobs:
-                parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-                for point, stats, kept in parallel(
-                        joblib.delayed(run_task)(point_tasks[p], blocks, keep, options.reference)
-                        for p, blocks in tasks):
-                    acc, trials = partial[point]
-                    acc.merge(stats)
-                    trials.update(kept)
-                    remaining[point] -= len(stats.blocks)
-                    bar.update(sum(_block_trials(study, point, b) for b in stats.blocks))
-                    if remaining[point] == 0:
-                        del partial[point]
-                        finished = acc.finalize(signed, study.header.confidence)
-                        checkpoints.save(point, finished, trials)
-                        done[point] = (finished, trials)
-                        if on_point is not None:
-                            on_point(point)
+    gone: list[str] = []
+    start, announced, ran = time.monotonic(), False, 0
+    try:
+        with bar:
+            if todo:
+                with _backend(options, gone) as n_jobs:
+                    parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
+                    for point, stats, kept in parallel(
+                            joblib.delayed(run_task)(point_tasks[p], blocks, keep,
+                                                     options.reference)
+                            for p, blocks in _tasks(study, todo, chunk_blocks)):
+                        acc, trials = partial[point]
+                        acc.merge(stats)
+                        trials.update(kept)
+                        remaining[point] -= stats.blocks
+                        bar.update(stats.trials)
+                        ran += stats.trials
+                        elapsed = time.monotonic() - start
+                        if not announced and elapsed > ESTIMATE_AFTER and ran < total:
+                            announced = True
+                            log.info("%s: about %s left at %s trials/s", h.name,
+                                     _duration((total - ran) * elapsed / ran),
+                                     f"{ran / elapsed:,.0f}")
+                        if remaining[point] == 0:
+                            del partial[point]
+                            finished = acc.finalize(signed, h.confidence, check)
+                            if checkpoints is not None:
+                                checkpoints.save(point, finished, trials)
+                            done[point] = (finished, trials)
+                            if on_point is not None:
+                                on_point(point)
+    except KeyboardInterrupt:
+        saved = len(done) - len(resumed)
+        where = f"; rerun the same command to resume from {checkpoints.dir}" \
+            if checkpoints is not None and done else ""
+        why = gone[0] if gone else "interrupted"
+        raise RunInterrupted(f"{h.name}: {why}; {len(done)} of {len(study.points)} grid points "
+                             f"finished ({saved} in this run){where}") from None
     points = [done[gp.index][0] for gp in study.points]
     trials = {p: _trials_frame(study, p, done[p][1]) for p in done if done[p][1]}
-    return StudyResult(study, points, trials)
+    origin = {"points": resumed, "from": str(checkpoints.dir), "key": checkpoints.key} \
+        if resumed and checkpoints is not None else {}
+    return StudyResult(study, points, trials, origin)
+
+
+def _duration(seconds: float) -> str:
+    """A duration for people: 45 s, 12 min, 3.5 h, 2.1 days, 4.0e+03 years."""
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= 2 * size:
+            value = seconds / size
+            return f"{value:.2g} {unit}" if value < 1e4 else f"{value:.1e} {unit}"
+    return f"{seconds:.0f} s"

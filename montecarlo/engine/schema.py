@@ -18,32 +18,38 @@ from montecarlo.engine.distributions import Distribution
 
 
 class Strict(BaseModel):
-    """Base of every study-file model: unknown keys and wrong types are errors."""
+    """Base of every study-file model: unknown keys, wrong types, NaN and infinity are errors."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True)
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True,
+                              allow_inf_nan=False)
+
+
+LARGEST = 1e6
+"""Largest magnitude an error source's value, bound or sigma may have (any unit): beyond it a
+number is a typo, not a calibration range."""
 
 
 class FixedSource(Strict):
     dist: Literal["fixed"]
-    value: float
+    value: float = Field(ge=-LARGEST, le=LARGEST)
 
 
 class UniformSource(Strict):
     dist: Literal["uniform"]
-    bound: float = Field(ge=0)
-    center: float = 0.0
+    bound: float = Field(ge=0, le=LARGEST)
+    center: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
 
 
 class NormalSource(Strict):
     dist: Literal["normal"]
-    sigma: float = Field(ge=0)
-    mean: float = 0.0
+    sigma: float = Field(ge=0, le=LARGEST)
+    mean: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
 
 
 class CornersSource(Strict):
     dist: Literal["corners"]
-    bound: float = Field(ge=0)
-    center: float = 0.0
+    bound: float = Field(ge=0, le=LARGEST)
+    center: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
 
 
 def _number_is_fixed(value: Any) -> Any:

@@ -32,6 +32,7 @@ import difflib
 import hashlib
 import itertools
 import json
+import math
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -44,6 +45,9 @@ from montecarlo.engine.schema import Strict
 from montecarlo.engine.system import Metric, System
 from montecarlo.errors import InputError
 
+MAX_TRIALS = 10**13
+"""Most trials per grid point (years of computing at today's rates)."""
+
 
 class StudyHeader(Strict):
     """The ``[study]`` table."""
@@ -51,7 +55,7 @@ class StudyHeader(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", max_length=80)
     description: str = ""
     system: str
-    trials: int = Field(gt=0)
+    trials: int = Field(gt=0, le=MAX_TRIALS)
     seed: int = Field(ge=0)
     block_size: int | None = Field(default=None, gt=0, le=1 << 24)
     common_random_numbers: bool = True
@@ -121,6 +125,10 @@ class Study:
         return next(m for _, m in self.metrics if m.name == name)
 
 
+def _describe(overrides: dict[str, Any]) -> str:
+    return ", ".join(f"{k} = {v!r}" for k, v in overrides.items())
+
+
 def _short(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
@@ -142,6 +150,18 @@ def _validation_message(path: Path, err: ValidationError, prefix: tuple[str, ...
             msg += f" (did you mean '{close[0]}'?)"
     value = "" if e["type"] == "missing" else f" (got {_short(e.get('input'))})"
     return f"{path}: {loc}: {msg}{value}{where}"
+
+
+def _reject_non_finite(path: Path, node: Any, where: str = "") -> None:
+    """NaN or infinity anywhere in the file is an error (even a base value a sweep replaces)."""
+    if isinstance(node, float) and not math.isfinite(node):
+        raise InputError(f"{path}: {where or '(file)'}: not a finite number (got {node!r})")
+    if isinstance(node, dict):
+        for key, value in node.items():
+            _reject_non_finite(path, value, f"{where}.{key}" if where else str(key))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            _reject_non_finite(path, value, f"{where}[{i}]")
 
 
 def _parse_sweep(path: Path, raw: Any) -> list[tuple[str, dict[str, list[Any]]]]:
@@ -215,17 +235,25 @@ Systems = Mapping[str, Callable[[], System]]
 """System name -> factory of the system (see :data:`montecarlo.systems.REGISTRY`)."""
 
 
+def read_study_file(path: str | Path) -> dict[str, Any]:
+    """The parsed TOML of a study file; every problem is one line naming the file."""
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such study file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, not a study file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+
+
 def load_study(path: str | Path, systems: Systems, *, trials: int | None = None,
                seed: int | None = None) -> Study:
     """Read, validate and expand a study file; ``trials``/``seed`` override the file's."""
-    path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such study file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
-    return study_from_dict(raw, systems, path, trials=trials, seed=seed)
+    return study_from_dict(read_study_file(path), systems, path, trials=trials, seed=seed)
 
 
 def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<study>", *,
@@ -235,6 +263,7 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
     ``systems`` maps the names ``[study] system`` may take to their factories.
     """
     path = Path(path)
+    _reject_non_finite(path, raw)
     raw = copy.deepcopy(raw)
     header_raw = raw.pop("study", None)
     if not isinstance(header_raw, dict):
@@ -267,16 +296,23 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
         raise InputError(f"{path}: sweep: a key appears in two sweep groups")
 
     points = []
+    seen: dict[str, int] = {}
     for i, overrides in enumerate(_expand(groups)):
         point_raw = copy.deepcopy(raw)
         for key, value in overrides.items():
             _apply(path, point_raw, key, value)
-        where = f" [sweep point {i}: " + ", ".join(f"{k} = {v!r}" for k, v in overrides.items()) \
-            + "]" if overrides else ""
+        where = f" [sweep point {i}: {_describe(overrides)}]" if overrides else ""
         try:
             config = system.config_model.model_validate(point_raw)
         except ValidationError as err:
             raise InputError(_validation_message(path, err, (), where)) from None
+        resolved = json.dumps(config.model_dump(mode="json"), sort_keys=True)
+        if resolved in seen:
+            first = seen[resolved]
+            raise InputError(f"{path}: sweep: points {first} and {i} are the same study "
+                             f"({_describe(overrides) or 'the base point'}); remove the "
+                             "repeated value")
+        seen[resolved] = i
         prepared = system.prepare(config)
         values = {k: overrides[k] if k in overrides else _lookup(path, point_raw, k)
                   for k in sweep_keys}

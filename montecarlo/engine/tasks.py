@@ -6,6 +6,10 @@ needs (numpy, the system and, for fast systems, numba), not pandas, plotting or 
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import threading
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,6 +39,7 @@ def run_task(task: PointTask, blocks: range, keep_trials: bool, reference: bool 
     Uses the system's fused ``accumulate_block`` when it has one, unless per-trial values are
     kept or the reference implementation is asked for.
     """
+    _exit_with_parent()
     stats = PointStats()
     kept = {}
     fast = None if keep_trials or reference else getattr(task.system, "accumulate_block", None)
@@ -46,7 +51,31 @@ def run_task(task: PointTask, blocks: range, keep_trials: bool, reference: bool 
             fast(task.prepared, streams, first, n, b, stats)
             continue
         values, invalid = task.system.simulate_block(task.prepared, streams, first, n)
-        stats.add_block(b, values, invalid)
+        stats.add_block(b, values, invalid, n)
         if keep_trials:
             kept[b] = values
     return task.point, stats, kept
+
+
+_watched: list[int] = []
+
+
+def _exit_with_parent(poll: float = 1.0) -> None:
+    """In a loky worker, exit within ``poll`` seconds of the process that started it.
+
+    A worker whose parent was killed (SIGKILL leaves no chance to shut the pool down) is
+    adopted by another process; it notices its parent's id change and exits, so that no worker
+    outlives a killed run. Only loky's worker processes are watched: the main process (joblib's
+    sequential backend) and dask workers manage their own lifetime.
+    """
+    if _watched or not multiprocessing.current_process().name.startswith("LokyProcess"):
+        return
+    parent = os.getppid()
+    _watched.append(parent)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()

@@ -80,8 +80,12 @@ def read_mirror_csv(path: str | Path, min_mirrors: int = 1, need: str = "") -> M
         naming file, row and column.
     """
     numeric = [c for c in CSV_COLUMNS if c.endswith("_deg")]
+    azimuth, elevation = (-360.0, 360.0), (-90.0, 90.0)
     table = read_table(path, numeric, optional_numeric=["ins_roll_deg"], text=["mirror", "set"],
-                       choices={"set": SETS})
+                       choices={"set": SETS},
+                       ranges={"theodolite_az_deg": azimuth, "ins_az_deg": azimuth,
+                               "theodolite_el_deg": elevation, "ins_el_deg": elevation,
+                               "ins_roll_deg": (-180.0, 180.0)})
     if len(table) < min_mirrors:
         raise InputError(f"{path}: {len(table)} data rows, at least {min_mirrors} needed"
                          + (f" ({need})" if need else ""))

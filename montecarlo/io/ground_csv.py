@@ -74,6 +74,9 @@ class GroundData:
                    None if raw.get("session") is None else tuple(map(str, raw["session"])))
 
 
+FARTHEST = 1e6
+"""Largest target coordinate accepted [m] (1000 km)."""
+
 CSV_COLUMNS = ("target", "x_m", "y_m", "z_m", "px", "pz")
 """Required columns of a ground data CSV; ``t_s`` and ``session`` are optional."""
 
@@ -92,7 +95,9 @@ def read_ground_csv(path: str | Path, camera: Camera, min_rows: int = 1, need: s
         Missing column, non-numeric or NaN value, too few rows, a target at the origin, or an
         image coordinate outside the detector; one line naming file, row and column.
     """
+    far = (-FARTHEST, FARTHEST)
     table = read_table(path, ["x_m", "y_m", "z_m", "px", "pz"], optional_numeric=["t_s"],
+                       ranges={"x_m": far, "y_m": far, "z_m": far, "t_s": (-1e9, 1e9)},
                        text=["target"])
     if len(table) < min_rows:
         raise InputError(f"{path}: {len(table)} data rows, at least {min_rows} needed"

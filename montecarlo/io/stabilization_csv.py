@@ -21,6 +21,9 @@ CSV_COLUMNS = ("t_s", "gyro_x", "gyro_y", "gyro_z", "eta_rad", "eps_rad", "los_x
 """Columns of a run: time [s], IMU rate [rad/s] (IMU axes), gimbal azimuth and pitch [rad],
 measured image position of the target [px] (x right, z up, from the image centre)."""
 
+MAX_RATE = 100.0
+"""Largest gyro rate accepted [rad/s] (beyond any carrier's rocking)."""
+
 MAX_GIMBAL_PITCH = np.radians(89.0)
 """Eq. (4) divides by cos(eps): runs with |eps| beyond this are refused [rad]."""
 
@@ -53,7 +56,11 @@ def read_csv(path: str | Path) -> Record:
         Missing column, non-numeric value, fewer than 10 rows, times not strictly increasing,
         or a gimbal pitch beyond ``MAX_GIMBAL_PITCH``; one line naming file, row and column.
     """
-    table = read_table(path, CSV_COLUMNS, min_rows=10)
+    rate = (-MAX_RATE, MAX_RATE)
+    table = read_table(path, CSV_COLUMNS, min_rows=10,
+                       ranges={"gyro_x": rate, "gyro_y": rate, "gyro_z": rate,
+                               "eta_rad": (-4 * np.pi, 4 * np.pi), "t_s": (-1e9, 1e9),
+                               "los_x_px": (-1e6, 1e6), "los_z_px": (-1e6, 1e6)})
     t = table["t_s"].to_numpy(float)
     bad = np.flatnonzero(np.diff(t) <= 0.0)
     if bad.size:

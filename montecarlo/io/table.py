@@ -5,6 +5,8 @@ Row numbers in messages are the line numbers a text editor shows (the header is 
 
 from __future__ import annotations
 
+import csv
+import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -21,6 +23,7 @@ def read_table(
     optional_numeric: Iterable[str] = (),
     text: Iterable[str] = (),
     choices: Mapping[str, Iterable[str]] | None = None,
+    ranges: Mapping[str, tuple[float, float]] | None = None,
     min_rows: int = 1,
 ) -> pd.DataFrame:
     """Read a CSV file and check its columns and values.
@@ -32,6 +35,7 @@ def read_table(
     optional_numeric : columns that may be absent; if present they are checked like ``numeric``.
     text : columns that must be present, non-empty strings.
     choices : for some text columns, the values allowed.
+    ranges : for some numeric columns, the interval [low, high] their values must lie in.
     min_rows : fewest data rows accepted.
 
     Returns
@@ -41,16 +45,28 @@ def read_table(
     Raises
     ------
     InputError
-        Missing file or column, a non-numeric, NaN or infinite value, a value not among its
-        choices, or fewer than ``min_rows`` rows; the message names file, row and column.
+        Missing file or column, a repeated column name, a non-numeric, NaN or infinite value,
+        a value out of its range or not among its choices, or fewer than ``min_rows`` rows;
+        the message names file, row and column.
     """
     path = Path(path)
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, not a CSV file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
+    with path.open(errors="replace") as f:
+        header = next(csv.reader([f.readline()]), [])
+    names = [c.strip() for c in header]
+    repeated = sorted({c for c in names if names.count(c) > 1})
+    if repeated:
+        raise InputError(f"{path}: column {repeated[0]!r} appears {names.count(repeated[0])} "
+                         "times in the header")
     frame.columns = [str(c).strip() for c in frame.columns]
     numeric, text = list(numeric), list(text)
     for column in [*numeric, *text]:
@@ -68,6 +84,12 @@ def read_table(
             i = int(np.flatnonzero(bad)[0])
             raise InputError(
                 f"{path}: row {i + 2}, column '{column}': {raw.iloc[i]!r} is not a finite number")
+        low, high = (ranges or {}).get(column, (-math.inf, math.inf))
+        bad = (values < low) | (values > high)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{path}: row {i + 2}, column '{column}': {raw.iloc[i]} is outside "
+                             f"[{low:g}, {high:g}]")
         frame[column] = values
     for column in text:
         values = frame[column].str.strip()

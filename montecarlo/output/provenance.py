@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import platform
 import subprocess
@@ -11,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from montecarlo import __version__
+from montecarlo.engine.checkpoints import code_fingerprint
 
 LIBRARIES = ("numpy", "scipy", "pandas", "pyarrow", "joblib", "dask", "distributed",
              "matplotlib", "pydantic", "numba")
@@ -39,18 +41,41 @@ def library_versions() -> dict[str, str | None]:
     return versions
 
 
-def provenance(study_hash: str, seed: int, resolved: dict[str, Any],
-               run_options: dict[str, Any]) -> dict[str, Any]:
-    """Provenance record. ``run_options`` (jobs, backend, chunking) do not change results."""
+def cpu_model() -> str:
+    """The processor's model name (results are bit-identical only on one CPU type)."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.partition(":")[2].strip()
+    return platform.processor() or platform.machine()
+
+
+def provenance(kind: str, **record: Any) -> dict[str, Any]:
+    """Provenance of a result of command ``kind`` (``run``, ``size``, ``diagnose``, ...).
+
+    Beside ``record`` (seed, study hash and resolved study, inputs, options), it records the
+    package version, the git commit and a fingerprint of the source, library versions, the
+    platform and CPU model, the command line and the time. ``kind`` (and ``study`` for a study
+    run) is what :class:`montecarlo.io.files.OutputDir` checks before replacing a result.
+    """
     return {
-        "study_hash": study_hash,
-        "seed": seed,
+        "kind": kind,
+        **record,
         "package_version": __version__,
         "git_commit": git_commit(),
+        "code_fingerprint": code_fingerprint(),
         "libraries": library_versions(),
         "platform": platform.platform(),
+        "cpu": cpu_model(),
         "command": " ".join(sys.argv),
         "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        "run_options": run_options,
-        "resolved_study": resolved,
     }
+
+
+def study_provenance(result: Any, run_options: dict[str, Any]) -> dict[str, Any]:
+    """Provenance of a study run: the study, its hash, seed and resolved form, how it was run
+    (``run_options`` do not change results) and which points came from checkpoints."""
+    study = result.study
+    return provenance("run", study=study.header.name, study_hash=study.hash(),
+                      seed=study.header.seed, run_options=run_options,
+                      resumed=result.resumed or None, resolved_study=study.resolved())

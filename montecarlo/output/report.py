@@ -28,30 +28,27 @@ def markdown_table(frame: pd.DataFrame, floatfmt: str = ".4g") -> str:
 
 
 def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | None:
-    """Per grid point and variant: the spec statistic, its interval and whether the spec is met.
+    """Per grid point and variant: the spec statistic, its interval and the verdict.
 
-    'meets' needs the whole confidence interval below the limit, 'fails' the whole interval
-    above; otherwise the trials do not decide ('undecided: more trials'). For max, mean and std
-    no interval is computed and the value alone decides.
+    The verdict is judged on the statistic over all trials, a trial without a value counting as
+    larger than the limit (``spec_value``, ``spec_lo``, ``spec_hi`` of the summary): 'meets'
+    needs the whole confidence interval at or below the limit, 'fails' the whole interval
+    above; otherwise the trials do not decide ('undecided'). For max, mean and std no interval
+    is computed and the value alone decides.
     """
     study = result.study
     spec = study.spec
     if spec is None:
         return None
-    sel = summary[summary["metric"] == spec.metric]
-    if spec.variant is not None:
-        sel = sel[sel["variant"] == spec.variant]
+    sel = summary[summary["verdict"].notna()] if "verdict" in summary else summary.iloc[:0]
     stat = spec.statistic
-    has_ci = stat.startswith("p")
-    lo = sel[f"{stat}_lo"] if has_ci else sel[stat]
-    hi = sel[f"{stat}_hi"] if has_ci else sel[stat]
-    verdict = ["meets" if h <= spec.limit else "fails" if lo_ > spec.limit
-               else "undecided: more trials" for lo_, h in zip(lo.fillna(-math.inf),
-                                                               hi.fillna(math.inf), strict=True)]
-    out = sel[["point", *study.sweep_keys, "variant", "count", stat]].copy()
-    if has_ci:
-        out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" for a, b in zip(lo, hi, strict=True)]
-    out["verdict"] = verdict
+    out = sel[["point", *study.sweep_keys, "variant", "trials", "invalid_fraction"]].copy()
+    out[f"{stat} (valid trials)"] = sel[stat]
+    out[f"{stat} (all trials)"] = sel["spec_value"]
+    if stat.startswith("p"):
+        out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" for a, b in
+                             zip(sel["spec_lo"], sel["spec_hi"], strict=True)]
+    out["verdict"] = sel["verdict"]
     return out.rename(columns={k: key_label(k) for k in study.sweep_keys})
 
 
@@ -89,15 +86,19 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
         lines += ["", "## Spec", "",
                   f"Requirement: {spec.statistic} of `{spec.metric}`"
                   f"{' (' + spec.variant + ')' if spec.variant else ''} ≤ {spec.limit:g} "
-                  f"{study.metric(spec.metric).unit}.", "",
+                  f"{study.metric(spec.metric).unit}, judged over all trials: a trial "
+                  "without a solution counts as exceeding the limit.", "",
                   markdown_table(verdicts), ""]
 
     cols = ["point", *study.sweep_keys, "variant", "count", "invalid", "mean", "std", "p50",
             "p95", "p95_lo", "p95_hi", "p99", "max"]
+    if (summary["invalid_fraction"] > 0).any():
+        cols.insert(cols.index("invalid") + 1, "invalid_fraction")
     table = summary.loc[summary["metric"] == metric, cols].rename(
         columns={k: key_label(k) for k in study.sweep_keys})
     lines += ["", f"## Summary: {m.label} [{m.unit}]", "",
-              "All metrics are in `summary.csv` / `summary.parquet`.", "",
+              "All metrics are in `summary.csv` / `summary.parquet`. Moments, percentiles and "
+              "max are over the trials with a solution (`percentiles_over = valid`).", "",
               markdown_table(table), ""]
 
     inv = summary[summary["invalid"] > 0]

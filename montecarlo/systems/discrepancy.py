@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-import tempfile
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -256,9 +254,7 @@ def monte_carlo_gap(d: Diagnosis, view: SystemView, trials: int = 200, seed: int
     if sweep:
         raw["sweep"] = {"mode": "zip", **sweep}
     study = study_from_dict(raw, f"<diagnose {view.system}>")
-    with tempfile.TemporaryDirectory() as tmp:
-        result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False,
-                                             checkpoint_dir=Path(tmp)))
+    result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False))
     column = "default/chi2_red"
     values = [result.trials[p.index][column].to_numpy(float) for p in study.points]
     return {"before": values[0], "after": values[-1]}

@@ -67,8 +67,8 @@ class Mounting(Strict):
 
 
 class Geometry(Strict):
-    L_m: float = Field(gt=0)
-    H_m: float
+    L_m: float = Field(gt=0, le=1e5)
+    H_m: float = Field(ge=-1e4, le=1e4)
 
     @field_validator("H_m")
     @classmethod
@@ -317,7 +317,7 @@ class GroundSystem:
         moments = {key: tuple(acc[r]) for r, key in enumerate(keys) if key[0] in p.variants}
         invalid = {v: reason_counts(flag_counts[i]) for i, v in enumerate(SOLVERS)
                    if v in p.variants}
-        stats.add_block_summary(block, moments, invalid)
+        stats.add_block_summary(block, moments, invalid, n)
 
     def describe(self, prepared: PreparedGround) -> list[str]:
         p = prepared

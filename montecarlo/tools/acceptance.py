@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import tempfile
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -88,9 +86,7 @@ def run(system: str, trials: int = 500, seed: int = 2024, n_jobs: int = 2) -> pd
                      "per_trial": True},
            "params": {"diagnose": 1}, "sweep": {"mode": "zip", **sweep}}
     study = study_from_dict(raw, f"<acceptance {system}>")
-    with tempfile.TemporaryDirectory() as tmp:
-        result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False,
-                                             checkpoint_dir=Path(tmp)))
+    result = run_study(study, RunOptions(n_jobs=n_jobs, progress=False))
     rows = []
     for case, gp in zip(cases, study.points, strict=True):
         frame = result.trials[gp.index]

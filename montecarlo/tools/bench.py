@@ -100,15 +100,8 @@ def _block_rate(n: int, repeats: int, fast: bool) -> float:
 def runner_rate(n: int, repeats: int, n_jobs: int = 2) -> float:
     """(d) trials per second through run_study on ``n_jobs`` loky workers."""
     study = _study(n)
-    with tempfile.TemporaryDirectory() as tmp:
-        options = RunOptions(n_jobs=n_jobs, progress=False, checkpoint_dir=Path(tmp))
-
-        def run() -> None:
-            run_study(study, options)
-            for f in Path(tmp).glob("*/*.pkl"):  # start each run afresh, not from checkpoints
-                f.unlink()
-
-        return _median_rate(run, n, repeats)
+    options = RunOptions(n_jobs=n_jobs, progress=False)  # no checkpoints: each run afresh
+    return _median_rate(lambda: run_study(study, options), n, repeats)
 
 
 def study_memory(trials: int) -> dict[str, float]:

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import datetime as dt
 import io
+import json
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,9 +28,9 @@ import pandas as pd
 from montecarlo import __version__
 from montecarlo.engine.checkpoints import Checkpoints
 from montecarlo.engine.runner import RunOptions, run_study
-from montecarlo.io.files import atomic_write_bytes
+from montecarlo.io.files import PROVENANCE, OutputDir, atomic_write_bytes
 from montecarlo.output.outputs import write_outputs
-from montecarlo.output.provenance import git_commit
+from montecarlo.output.provenance import git_commit, provenance
 from montecarlo.output.report import markdown_table
 from montecarlo.seed000.table1 import TABLE1_ROWS
 from montecarlo.systems import load_study
@@ -117,32 +119,43 @@ def append_history(path: Path, checks: list[Check], stamp: str, commit: str | No
 
 def run_nightly(studies_dir: Path = Path("studies"), out_dir: Path = Path("results/nightly"),
                 n_jobs: int = 2, progress: bool = True) -> tuple[bool, list[Check]]:
-    """Run the nightly studies and checks; returns (all passed, checks)."""
-    options = RunOptions(n_jobs=n_jobs, progress=progress,
-                         checkpoint_dir=out_dir / ".checkpoints")
-    summaries = {}
-    for name in ("table1", "trends"):
-        study = load_study(studies_dir / f"{name}.toml")
-        result = run_study(study, options)
-        write_outputs(result, out_dir / name, options)
-        Checkpoints(options.checkpoint_dir, study).remove()
-        summaries[name] = result.to_frame()
-    checks = table1_checks(summaries["table1"]) + trend_checks(summaries["trends"])
-    stamp = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
-    commit = git_commit()
-    append_history(out_dir / "history.csv", checks, stamp, commit)
-    passed = all(c.passed for c in checks)
-    table = pd.DataFrame([{"check": c.name, "value": c.value, "expected": c.expected,
-                           "result": "pass" if c.passed else "**FAIL**"} for c in checks])
-    report = "\n".join([
-        "# Nightly regression check", "",
-        f"{stamp}, montecarlo {__version__}, commit `{commit}`: "
-        f"**{'all checks passed' if passed else 'REGRESSION'}** "
-        f"({sum(c.passed for c in checks)} of {len(checks)} checks pass).", "",
-        "Delta is the Table 1 metric arccos((1 + tr D)/4) for the Table 1 rows (worst case over "
-        "the 64 corners) and the true rotation angle of D for the trends (sampled, common "
-        "random numbers; `trends/report.md`).", "",
-        markdown_table(table), "",
-        "History: `history.csv`. Study outputs: `table1/`, `trends/`.", ""])
-    atomic_write_bytes(out_dir / "report.md", report.encode())
+    """Run the nightly studies and checks; returns (all passed, checks).
+
+    ``out_dir`` is replaced as a whole (it must be absent, empty or an earlier nightly result);
+    its ``history.csv`` is carried forward with this run's rows appended.
+    """
+    checkpoint_root = out_dir.parent / ".checkpoints"
+    options = RunOptions(n_jobs=n_jobs, progress=progress, checkpoint_dir=checkpoint_root)
+    target = OutputDir(out_dir, "nightly")
+    with target as staging:
+        summaries = {}
+        for name in ("table1", "trends"):
+            study = load_study(studies_dir / f"{name}.toml")
+            result = run_study(study, options)
+            (staging / name).mkdir()
+            write_outputs(result, staging / name, options)
+            Checkpoints(checkpoint_root, study).remove()
+            summaries[name] = result.to_frame()
+        checks = table1_checks(summaries["table1"]) + trend_checks(summaries["trends"])
+        stamp = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+        commit = git_commit()
+        if target.previous is not None and (target.previous / "history.csv").exists():
+            shutil.copy(target.previous / "history.csv", staging / "history.csv")
+        append_history(staging / "history.csv", checks, stamp, commit)
+        passed = all(c.passed for c in checks)
+        table = pd.DataFrame([{"check": c.name, "value": c.value, "expected": c.expected,
+                               "result": "pass" if c.passed else "**FAIL**"} for c in checks])
+        report = "\n".join([
+            "# Nightly regression check", "",
+            f"{stamp}, montecarlo {__version__}, commit `{commit}`: "
+            f"**{'all checks passed' if passed else 'REGRESSION'}** "
+            f"({sum(c.passed for c in checks)} of {len(checks)} checks pass).", "",
+            "Delta is the Table 1 metric arccos((1 + tr D)/4) for the Table 1 rows (worst case "
+            "over the 64 corners) and the true rotation angle of D for the trends (sampled, "
+            "common random numbers; `trends/report.md`).", "",
+            markdown_table(table), "",
+            "History: `history.csv`. Study outputs: `table1/`, `trends/`.", ""])
+        atomic_write_bytes(staging / "report.md", report.encode())
+        atomic_write_bytes(staging / PROVENANCE, json.dumps(provenance(
+            "nightly", studies=str(studies_dir), passed=passed), indent=2).encode())
     return passed, checks
