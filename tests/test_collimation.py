@@ -62,6 +62,34 @@ def test_predicted_attitude_autocollimates():
     np.testing.assert_allclose(axis_n, w, atol=1e-14)
 
 
+def test_readings_agree_with_an_independent_numerical_solve():
+    """Heading and pitch of the closed form = a numerical solve of "the optical axis, turned by
+    the INS attitude (scipy, Z-X-Y with yaw = -heading), lies along the mirror normal", written
+    here without the module's direction or attitude functions."""
+    from scipy.optimize import least_squares
+
+    def unit(az, el):
+        return np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
+
+    local = np.random.default_rng(11)
+    for _ in range(20):
+        gamma, lam = local.uniform(-0.02, 0.02, 2)
+        az, el, roll = local.uniform(-3.0, 3.0), local.uniform(-1.0, 1.0), local.uniform(-0.5, 0.5)
+        frame = local.uniform(-3.0, 3.0)
+        target = Rotation.from_euler("Z", -frame).apply(unit(az, el))
+        u = unit(gamma, lam)
+
+        def miss(x, u=u, target=target, roll=roll):
+            return Rotation.from_euler("ZXY", [-x[0], x[1], roll]).apply(u) - target
+
+        guess = np.array([az + frame, el])
+        solved = least_squares(miss, guess, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+        heading, pitch = col.predict_readings({"axis_az": gamma, "axis_el": lam,
+                                               "frame_heading": frame}, az, el, roll)
+        assert col.wrap(heading - solved[0]) == pytest.approx(0.0, abs=1e-10)
+        assert pitch == pytest.approx(solved[1], abs=1e-10)
+
+
 def test_analytic_limits():
     """lambda only: pitch = el - lambda, heading = az + h0. gamma only: the closed forms."""
     az, el = np.radians([0.0, 40.0, 170.0]), np.radians([0.0, 30.0, 60.0])

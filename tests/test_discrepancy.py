@@ -241,3 +241,48 @@ def test_estimate_beyond_its_physical_bound_stays_at_the_bound():
     assert d.named[0] == "quadratic"
     assert d.after.params["c_quadratic"] == pytest.approx(100.0, rel=1e-6)
     assert d.unexplained
+
+
+def test_mdb_uses_the_candidates_own_test_where_it_needs_more():
+    """Four observations (2 degrees of freedom) and several candidates: the candidate's own test
+    at alpha / m needs a larger noncentrality than the global test, and the MDB must use it."""
+    x = np.array([-1.0, -0.4, 0.3, 1.0])
+    columns = {"quadratic": x**2, "cubic": x**3, "step": (x > 0).astype(float)}
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    cands = tuple(Effect(n, (f"c_{n}",), ((-100.0, 100.0),), (1e-3,)) for n in columns)
+
+    def residuals(v):
+        pred = np.asarray(v.get("a", 0.0)) + np.asarray(v.get("b", 0.0)) * x + sum(
+            np.asarray(v.get(f"c_{n}", 0.0)) * c for n, c in columns.items())
+        return (0.2 + 0.1 * x - pred) / 1.0
+
+    problem = Problem("few", base, cands, residuals, {"a": 0.0, "b": 0.0})
+    fit = fit_model(problem, ())
+    tests = [t for t in analyse_candidates(problem, fit) if t.status in ("testable",
+                                                                          "undetectable")]
+    m = len(tests)
+    glob, own = noncentrality(0.01, fit.dof), noncentrality(0.01 / m, 1)
+    assert fit.dof == 2 and m == 3 and own > glob
+    for t in tests:
+        assert t.lambda0 == pytest.approx(own, rel=1e-12)
+
+
+def test_holm_adjusted_p_values_reach_the_report_json():
+    """The JSON's named effect carries the Holm-adjusted p-value of its candidate family, and
+    each candidate's p_adjusted is Holm's over the family of that step."""
+    from montecarlo.discrepancy.view import SystemView, to_json
+
+    rng = np.random.default_rng(2)
+    y = 0.3 + 0.5 * X + 1.6 * X**3 + 0.3 * rng.standard_normal(X.size)
+    problem = toy_problem(y, sigma=0.3)
+    d = diagnose(problem)
+    assert d.named == ["cubic"]
+    view = SystemView("toy", lambda name: ("1", 1.0), "1", 1.0, ("r", "r"),
+                      lambda params: np.zeros((X.size, 2)), [], "none", lambda fit: {})
+    report = to_json(d, view, "toy")
+    family = [c for c in report["candidates"] if np.isfinite(c["p_adjusted"])]
+    adjusted = multipletests([c["p_value"] for c in family], method="holm")[1]
+    np.testing.assert_allclose([c["p_adjusted"] for c in family], adjusted, rtol=1e-12)
+    named = report["named_effects"][0]
+    assert named["p_value"] == next(c["p_adjusted"] for c in family if c["name"] == "cubic")
+    assert named["p_value"] != next(c["p_value"] for c in family if c["name"] == "cubic")

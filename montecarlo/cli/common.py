@@ -59,6 +59,8 @@ positive = number(float, low=0.0, open_low=True)
 nonnegative = number(float, low=0.0)
 probability = number(float, low=0.0, high=1.0, open_low=True, open_high=True)
 finite = number(float)
+field_of_view = number(float, low=0.0, high=180.0, open_low=True, open_high=True)
+"""A full field of view [deg]."""
 
 
 def knob_assignment(text: str) -> tuple[str, str]:

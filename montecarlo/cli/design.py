@@ -23,10 +23,15 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     """The base ground design (--study or the built-in one) and its [spec] table, if any."""
     from montecarlo.design import sizing_problem
     from montecarlo.engine.study import read_study_file
+    from montecarlo.systems import study_from_dict
 
     if args.study is None:
         return sizing_problem.DEFAULT_DESIGN, None
     raw = read_study_file(args.study)
+    study = study_from_dict(raw, args.study)  # every mistake named in the file, before any work
+    if study.header.system != "ground":
+        raise InputError(f"{args.study}: study.system: sizing and budgets need a ground study "
+                         f"(got {study.header.system!r})")
     return raw, raw.get("spec")
 
 
@@ -130,8 +135,10 @@ def _sizing_answers(path: str, relations: Sequence[str]) -> dict[str, dict[str, 
             raise InputError(f"{path}: row {row}: no answer for pixel relation {rel!r} "
                              f"(nothing met the spec); leave it out with --relations")
         points[rel] = {k: float_of(f"{path}: row {row}: column", k, r[k]) for k in knobs}
-    if not points:
-        raise InputError(f"{path}: no row for pixel relation(s) {', '.join(relations)}")
+    missing = [rel for rel in relations if rel not in points]
+    if missing:
+        raise InputError(f"{path}: no row for pixel relation {missing[0]!r} (choose the "
+                         "relations it has with --relations)")
     return points
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    field_of_view,
     finite,
     nonnegative,
     nonnegative_int,
@@ -39,6 +40,13 @@ def _check_outputs(args: argparse.Namespace) -> None:
         OutputDir(args.report, "diagnose").check()
     if args.json:
         writable_file(args.json)
+
+
+def _check_files(args: argparse.Namespace) -> None:
+    """Refuse, before any work, data and truth files that cannot be written."""
+    writable_file(args.out)
+    if args.truth:
+        writable_file(args.truth)
 
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
@@ -117,6 +125,7 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
     from montecarlo.geometry.camera import Camera
     from montecarlo.io.ground_csv import GroundData, write_ground_csv
 
+    _check_files(args)
     try:
         camera = Camera.from_degrees(args.fov_deg[0], args.fov_deg[1], args.pixels[0],
                                      args.pixels[1])
@@ -157,6 +166,7 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
     from montecarlo.io.collimation_csv import write_mirror_csv
     from montecarlo.seed003.model import Noise
 
+    _check_files(args)
     candidates = {c.name: c for c in ce.CANDIDATES}
     effects = synth.parse_effects(args.effect, candidates, ce.display_unit)
     at_mdb = synth.parse_multiples(args.at_mdb, candidates)
@@ -203,7 +213,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")
     p.add_argument("data", help="CSV: target, x_m, y_m, z_m, px, pz[, t_s][, session]")
-    p.add_argument("--fov-deg", type=positive, nargs=2, required=True, metavar=("FY", "FP"),
+    p.add_argument("--fov-deg", type=field_of_view, nargs=2, required=True, metavar=("FY", "FP"),
                    help="full fields of view about z (yaw) and x (pitch) [deg]")
     p.add_argument("--pixels", type=positive_int, nargs=2, required=True,
                    metavar=("NX", "NZ"), help="pixel counts across x and z")
@@ -238,7 +248,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = ssub.add_parser("ground", help="targets spread over the field at several ranges")
     effect_options(p)
-    p.add_argument("--fov-deg", type=positive, nargs=2, default=[90.0, 90.0])
+    p.add_argument("--fov-deg", type=field_of_view, nargs=2, default=[90.0, 90.0])
     p.add_argument("--pixels", type=positive_int, nargs=2, default=[512, 512])
     p.add_argument("--pixel-sigma", type=nonnegative, default=0.3, help="[px] (0.3)")
     p.add_argument("--survey-sigma-m", type=nonnegative, default=0.01, help="[m] (0.01)")

@@ -10,21 +10,22 @@ import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    field_of_view,
     finite,
     nonnegative_int,
+    number,
     positive,
     positive_int,
 )
-from montecarlo.errors import InputError
 from montecarlo.units import ARCMIN, DEG_PER_HOUR, DEG_PER_ROOT_HOUR
+
+forgetting = number(float, low=0.0, high=1.0, open_low=True)
+"""An RLS forgetting factor, in (0, 1]."""
 
 
 def _stabilization_camera(args: argparse.Namespace):
     from montecarlo.geometry.camera import Camera
 
-    if not 0.0 < args.fov_deg < 180.0 or args.pixels <= 0:
-        raise InputError(f"--fov-deg must be in (0, 180) and --pixels positive, got "
-                         f"{args.fov_deg} and {args.pixels}")
     return Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
 
 
@@ -33,9 +34,6 @@ def _stabilization_setup(args: argparse.Namespace):
     from montecarlo.seed001.simulate import Setup
 
 
-    if args.duration <= 0.0 or args.rate <= 0.0:
-        raise InputError(f"--duration and --rate must be positive, got {args.duration} and "
-                         f"{args.rate}")
     rocking = Rocking(np.radians(args.rock_amp_deg), args.rock_freq_hz,
                            np.radians(args.rock_phase_deg))
     setup = Setup(duration=args.duration, rate=args.rate,
@@ -72,8 +70,6 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     from montecarlo.seed001.estimate import PARAMETER_NAMES, estimate
 
 
-    if not 0.0 < args.forgetting <= 1.0 or args.passes < 1 or args.image_noise_px <= 0.0:
-        raise InputError("--forgetting must be in (0, 1], --passes >= 1, --image-noise-px > 0")
     record = read_csv(args.csv)
     est = estimate(record.t, record.gyro, record.eta, record.eps, record.los_px,
                       _stabilization_camera(args), args.image_noise_px,
@@ -83,11 +79,17 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     rows = {name: (float(v / u), float(s / u)) for name, v, s, u in
             zip(PARAMETER_NAMES, est.values, est.sigma, units, strict=True)}
     if args.json:
+        from montecarlo.output.provenance import provenance
+
         print(json.dumps({
             "file": str(args.csv), "rows": int(record.t.size), "passes": est.passes,
             "converged": bool(est.converged), "residual_rms_px": float(est.residual_rms),
             "units": {"delta_*": "arcmin", "bias_*": "deg/h", "sigma": "1 standard deviation"},
             "parameters": {k: {"value": v, "sigma": s} for k, (v, s) in rows.items()},
+            "provenance": provenance("stabilization estimate", input=str(args.csv),
+                                     image_noise_px=args.image_noise_px,
+                                     gyro_arw_deg_per_rt_h=args.gyro_arw_deg_per_rt_h,
+                                     forgetting=args.forgetting, passes=args.passes),
         }, indent=2))
         return 0
     if args.passes == 1:
@@ -130,8 +132,8 @@ def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
 
 
 def _add_stabilization_profile(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=finite, default=60.0, help="run length [s] (60)")
-    p.add_argument("--rate", type=finite, default=100.0,
+    p.add_argument("--duration", type=positive, default=60.0, help="run length [s] (60)")
+    p.add_argument("--rate", type=positive, default=100.0,
                    help="gyro, gimbal-loop and camera frame rate [Hz] (100)")
     p.add_argument("--rock-amp-deg", type=finite, nargs=3, default=[5.0, 5.0, 5.0],
                    metavar=("YAW", "PITCH", "ROLL"), help="rocking amplitudes [deg] (5 5 5)")
@@ -142,14 +144,14 @@ def _add_stabilization_profile(p: argparse.ArgumentParser) -> None:
                    metavar=("YAW", "PITCH", "ROLL"), help="rocking phases [deg] (0 60 120)")
     p.add_argument("--aim-deg", type=finite, nargs=2, default=[20.0, 10.0],
                    metavar=("AZIMUTH", "PITCH"), help="gimbal angles at the start [deg] (20 10)")
-    p.add_argument("--image-noise-px", type=finite, default=0.1,
+    p.add_argument("--image-noise-px", type=positive, default=0.1,
                    help="image noise per axis [px] (0.1)")
     p.add_argument("--gyro-arw-deg-per-rt-h", type=finite, default=0.01,
                    help="gyro angle random walk [deg/sqrt(h)] (0.01)")
 
 
 def _add_stabilization_camera(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fov-deg", type=positive, default=5.0,
+    p.add_argument("--fov-deg", type=field_of_view, default=5.0,
                    help="square field of view [deg] (5)")
     p.add_argument("--pixels", type=positive_int, default=1024,
                    help="pixels across the image (1024)")
@@ -177,11 +179,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     est = ssub.add_parser("estimate", help="estimate installation angles from a CSV run")
     est.add_argument("csv", help="CSV file with the columns written by 'simulate'")
     _add_stabilization_camera(est)
-    est.add_argument("--image-noise-px", type=finite, default=0.1,
+    est.add_argument("--image-noise-px", type=positive, default=0.1,
                      help="image noise per axis [px] (0.1)")
     est.add_argument("--gyro-arw-deg-per-rt-h", type=finite, default=0.01,
                      help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
-    est.add_argument("--forgetting", type=finite, default=1.0,
+    est.add_argument("--forgetting", type=forgetting, default=1.0,
                      help="RLS forgetting factor in (0, 1] (1: none)")
     est.add_argument("--passes", type=positive_int, default=10,
                      help="most RLS passes (1: the patent's single linear pass) (10)")

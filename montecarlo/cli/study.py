@@ -15,7 +15,7 @@ from montecarlo.cli.common import (
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.engine.checkpoints import Checkpoints
-    from montecarlo.engine.runner import RunOptions, run_study
+    from montecarlo.engine.runner import RunOptions, checked_options, run_study
     from montecarlo.io.files import OutputDir
     from montecarlo.systems import load_study
 
@@ -26,6 +26,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
                          chunk_size=args.chunk_size, progress=not args.quiet,
                          checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
+    checked_options(study, options)  # before any directory is made
     with OutputDir(out, "run", {"study": study.header.name}) as staging:
         result = run_study(study, options)
         from montecarlo.output.outputs import write_outputs  # matplotlib: only for results

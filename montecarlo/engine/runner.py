@@ -42,7 +42,7 @@ from montecarlo.engine.aggregate import (
 )
 from montecarlo.engine.checkpoints import Checkpoints
 from montecarlo.engine.study import Study
-from montecarlo.engine.tasks import PointTask, run_task
+from montecarlo.engine.tasks import PointTask, exit_with_parent, run_task
 from montecarlo.errors import InputError, RunInterrupted
 
 Backend = Literal["loky", "dask"]
@@ -167,7 +167,8 @@ def _watch_workers(client: Any, stop: threading.Event, gone: list[str]) -> None:
 def _backend(options: RunOptions, gone: list[str]) -> Iterator[int]:
     """Context in which joblib uses the requested backend; yields n_jobs for Parallel."""
     if options.backend == "loky":
-        with joblib.parallel_config(backend="loky", inner_max_num_threads=1):
+        with joblib.parallel_config(backend="loky", inner_max_num_threads=1,
+                                    initializer=exit_with_parent, initargs=(os.getpid(),)):
             yield options.n_jobs
         return
     from distributed import Client, LocalCluster
@@ -205,7 +206,7 @@ def _trials_frame(study: Study, point: int, kept: dict[int, dict]) -> pd.DataFra
     return pd.DataFrame({"point": point, "trial": trial, **cols})
 
 
-def _checked_options(study: Study, options: RunOptions) -> RunOptions:
+def checked_options(study: Study, options: RunOptions) -> RunOptions:
     """Options checked before any work; local workers capped at the cores (one line says so).
 
     Raises
@@ -228,7 +229,7 @@ def _checked_options(study: Study, options: RunOptions) -> RunOptions:
                          f"the study's block size {bs}")
     cores = available_cores()
     if options.scheduler is None and options.n_jobs > cores:
-        log.info("--n-jobs %d: this machine has %d cores; using %d workers",
+        log.warning("--n-jobs %d: this machine has %d cores; using %d workers",
                  options.n_jobs, cores, cores)
         return replace(options, n_jobs=cores)
     return options
@@ -247,7 +248,7 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     RunInterrupted
         Ctrl-C, or a dask cluster without workers; finished points stay checkpointed.
     """
-    options = _checked_options(study, options)
+    options = checked_options(study, options)
     checkpoints = None if options.checkpoint_dir is None else \
         Checkpoints(Path(options.checkpoint_dir), study, options.reference)
     keep = study.header.per_trial
@@ -275,43 +276,42 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
                                 h.common_random_numbers, study.block_size, study.points[p].trials)
                    for p in todo}
     total = sum(study.points[p].trials for p in todo)
-    if todo:
-        log.info("%s: %d of %d grid points to run, %s trials", h.name, len(todo),
-                 len(study.points), f"{total:,}")
-    bar = tqdm(total=total, unit="trial", unit_scale=True, dynamic_ncols=True,
-               disable=not options.progress or not todo,
-               desc=f"{study.header.name}: {len(todo)}/{len(study.points)} points")
     gone: list[str] = []
-    start, announced, ran = time.monotonic(), False, 0
+    announced, ran = False, 0
     try:
-        with bar:
+        with _backend(options, gone) if todo else contextlib.nullcontext(1) as n_jobs:
+            start = time.monotonic()
             if todo:
-                with _backend(options, gone) as n_jobs:
-                    parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-                    for point, stats, kept in parallel(
-                            joblib.delayed(run_task)(point_tasks[p], blocks, keep,
-                                                     options.reference)
-                            for p, blocks in _tasks(study, todo, chunk_blocks)):
-                        acc, trials = partial[point]
-                        acc.merge(stats)
-                        trials.update(kept)
-                        remaining[point] -= stats.blocks
-                        bar.update(stats.trials)
-                        ran += stats.trials
-                        elapsed = time.monotonic() - start
-                        if not announced and elapsed > ESTIMATE_AFTER and ran < total:
-                            announced = True
-                            log.info("%s: about %s left at %s trials/s", h.name,
-                                     _duration((total - ran) * elapsed / ran),
-                                     f"{ran / elapsed:,.0f}")
-                        if remaining[point] == 0:
-                            del partial[point]
-                            finished = acc.finalize(signed, h.confidence, check)
-                            if checkpoints is not None:
-                                checkpoints.save(point, finished, trials)
-                            done[point] = (finished, trials)
-                            if on_point is not None:
-                                on_point(point)
+                log.info("%s: %d of %d grid points to run, %s trials", h.name, len(todo),
+                         len(study.points), f"{total:,}")
+            with tqdm(total=total, unit="trial", unit_scale=True, dynamic_ncols=True,
+                      disable=not options.progress or not todo,
+                      desc=f"{h.name}: {len(todo)}/{len(study.points)} points") as bar:
+                parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
+                for point, stats, kept in parallel(
+                        joblib.delayed(run_task)(point_tasks[p], blocks, keep,
+                                                 options.reference)
+                        for p, blocks in _tasks(study, todo, chunk_blocks)):
+                    acc, trials = partial[point]
+                    acc.merge(stats)
+                    trials.update(kept)
+                    remaining[point] -= stats.blocks
+                    bar.update(stats.trials)
+                    ran += stats.trials
+                    elapsed = time.monotonic() - start
+                    if not announced and elapsed > ESTIMATE_AFTER and ran < total:
+                        announced = True
+                        log.info("%s: about %s left at %s trials/s", h.name,
+                                 _duration((total - ran) * elapsed / ran),
+                                 f"{ran / elapsed:,.0f}")
+                    if remaining[point] == 0:
+                        del partial[point]
+                        finished = acc.finalize(signed, h.confidence, check)
+                        if checkpoints is not None:
+                            checkpoints.save(point, finished, trials)
+                        done[point] = (finished, trials)
+                        if on_point is not None:
+                            on_point(point)
     except KeyboardInterrupt:
         saved = len(done) - len(resumed)
         where = f"; rerun the same command to resume from {checkpoints.dir}" \

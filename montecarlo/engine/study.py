@@ -292,8 +292,9 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
 
     groups = _parse_sweep(path, raw.pop("sweep")) if "sweep" in raw else []
     sweep_keys = tuple(k for _, g in groups for k in g)
-    if len(set(sweep_keys)) != len(sweep_keys):
-        raise InputError(f"{path}: sweep: a key appears in two sweep groups")
+    repeated = [k for i, k in enumerate(sweep_keys) if k in sweep_keys[:i]]
+    if repeated:
+        raise InputError(f"{path}: sweep: key {repeated[0]!r} appears in two sweep groups")
 
     points = []
     seen: dict[str, int] = {}

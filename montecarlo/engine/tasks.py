@@ -6,7 +6,6 @@ needs (numpy, the system and, for fast systems, numba), not pandas, plotting or 
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import threading
 import time
@@ -39,7 +38,6 @@ def run_task(task: PointTask, blocks: range, keep_trials: bool, reference: bool 
     Uses the system's fused ``accumulate_block`` when it has one, unless per-trial values are
     kept or the reference implementation is asked for.
     """
-    _exit_with_parent()
     stats = PointStats()
     kept = {}
     fast = None if keep_trials or reference else getattr(task.system, "accumulate_block", None)
@@ -57,21 +55,13 @@ def run_task(task: PointTask, blocks: range, keep_trials: bool, reference: bool 
     return task.point, stats, kept
 
 
-_watched: list[int] = []
+def exit_with_parent(parent: int, poll: float = 1.0) -> None:
+    """Loky worker initializer: exit within ``poll`` seconds once process ``parent`` is gone.
 
-
-def _exit_with_parent(poll: float = 1.0) -> None:
-    """In a loky worker, exit within ``poll`` seconds of the process that started it.
-
-    A worker whose parent was killed (SIGKILL leaves no chance to shut the pool down) is
-    adopted by another process; it notices its parent's id change and exits, so that no worker
-    outlives a killed run. Only loky's worker processes are watched: the main process (joblib's
-    sequential backend) and dask workers manage their own lifetime.
+    A worker whose parent was killed (SIGKILL leaves no chance to shut the pool down) is adopted
+    by another process: its parent id is no longer ``parent``, and it exits, so that no worker
+    outlives a killed run. Dask workers manage their own lifetime.
     """
-    if _watched or not multiprocessing.current_process().name.startswith("LokyProcess"):
-        return
-    parent = os.getppid()
-    _watched.append(parent)
 
     def watch() -> None:
         while os.getppid() == parent:

@@ -64,6 +64,7 @@ class OutputDir:
     removed when the next one starts.
 
     ``previous`` is the existing result (or None), for commands that carry files forward.
+    Directories made to hold ``path`` are removed again if the body fails while they are empty.
     """
 
     def __init__(self, path: str | Path, kind: str, match: dict[str, Any] | None = None):
@@ -72,6 +73,7 @@ class OutputDir:
         self.match = match or {}
         self.previous: Path | None = None
         self.tmp: Path | None = None
+        self.created: list[Path] = []
 
     def check(self) -> None:
         """Raise InputError unless the directory may be (re)written; touches nothing."""
@@ -109,8 +111,10 @@ class OutputDir:
         from montecarlo.errors import InputError
 
         self.check()
+        missing = [d for d in (self.path.parent, *self.path.parent.parents) if not d.exists()]
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.created = missing
             self._remove_stale()
             self.tmp = Path(tempfile.mkdtemp(dir=self.path.parent,
                                              prefix=f".{self.path.name}.tmp-{os.getpid()}-"))
@@ -123,6 +127,9 @@ class OutputDir:
         assert self.tmp is not None
         if exc_type is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
+            for d in self.created:  # innermost first: directories made for this result only
+                with contextlib.suppress(OSError):
+                    d.rmdir()
             return
         old = None
         if self.path.exists():

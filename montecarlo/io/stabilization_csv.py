@@ -65,13 +65,13 @@ def read_csv(path: str | Path) -> Record:
     bad = np.flatnonzero(np.diff(t) <= 0.0)
     if bad.size:
         i = int(bad[0]) + 1
-        raise InputError(f"{path}: row {i + 2}, column 't_s': {t[i]!r} is not after the "
-                         f"previous time {t[i - 1]!r}")
+        raise InputError(f"{path}: row {i + 2}, column 't_s': {float(t[i])!r} is not after the "
+                         f"previous time {float(t[i - 1])!r}")
     eps = table["eps_rad"].to_numpy(float)
     bad = np.flatnonzero(np.abs(eps) > MAX_GIMBAL_PITCH)
     if bad.size:
         i = int(bad[0])
-        raise InputError(f"{path}: row {i + 2}, column 'eps_rad': {eps[i]!r} is beyond "
+        raise InputError(f"{path}: row {i + 2}, column 'eps_rad': {float(eps[i])!r} is beyond "
                          f"+-{MAX_GIMBAL_PITCH:.4f} rad (eq. (4) divides by cos(eps))")
     return Record(t=t, gyro=table[["gyro_x", "gyro_y", "gyro_z"]].to_numpy(float),
                   eta=table["eta_rad"].to_numpy(float), eps=eps,

@@ -265,7 +265,8 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax, p in zip(axes, points, strict=False):
         # each panel its own range (grid points may differ by orders of magnitude): to 1.5 p99
-        xmax = float(np.nanmax(sel.loc[sel["point"] == p, "p99"]) * 1.5)
+        p99 = sel.loc[sel["point"] == p, "p99"].to_numpy(float)
+        xmax = float(np.max(p99[np.isfinite(p99)], initial=0.0)) * 1.5
         if not xmax > 0.0:
             xmax = 1.0
         edges = np.linspace(0.0, xmax, 51)

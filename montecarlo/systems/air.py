@@ -33,5 +33,12 @@ AIR = ParamSystem(
                1.0 / SUFFIXES["arcmin"]),
     ),
     default_block_size=1 << 14,
+    limits={**dict.fromkeys(("heading_sigma", "level_sigma", "gyro_drift", "accel_bias",
+                             "install_bound", "master_heading_sigma", "master_level_sigma"),
+                            (0.0, 1e4)),
+            "master_error_shared": (0.0, 1.0),
+            **dict.fromkeys(("mount_psi", "mount_theta", "mount_gamma", "aircraft_heading",
+                             "aircraft_pitch", "aircraft_roll"), (-360.0, 360.0))},
+    choices={"ta_source": air.TA_SOURCES, "level_split": air.LEVEL_SPLITS},
 )
 """Seed 000, section 2: air dynamic calibration (:func:`montecarlo.seed000.air.run_trials`)."""

@@ -163,5 +163,12 @@ COLLIMATION = ParamSystem(
         Metric("chi2_red", "reduced χ² of the fit", "1", 1.0),
     ),
     default_block_size=64,
+    limits={"axis_az": (-18000.0, 18000.0), "axis_el": (-18000.0, 18000.0),
+            "frame_heading": (-360.0, 360.0), "frame_tilt_x": (-3600.0, 3600.0),
+            "frame_tilt_y": (-3600.0, 3600.0), "n_azimuth": (0, 1000), "n_pitch": (0, 1000),
+            "azimuth_span": (0.0, 360.0), "pitch_span": (0.0, 89.0),
+            **dict.fromkeys(("theodolite_sigma", "ins_heading_sigma", "ins_pitch_sigma",
+                             "ins_roll_sigma"), (0.0, 3600.0)),
+            "mount_roll_sigma": (0.0, 45.0), "use_roll": (0, 1), "fit_frame_tilt": (0, 1)},
 )
 """Seed 003: autocollimator-INS axis calibration, as a study system."""

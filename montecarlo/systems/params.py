@@ -17,11 +17,11 @@ the runner's reproducibility contract.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, create_model
+from pydantic import BaseModel, Field, create_model
 
 from montecarlo.engine.distributions import Streams
 from montecarlo.engine.schema import Strict
@@ -51,6 +51,9 @@ class ParamSystem:
         :data:`montecarlo.units.SUFFIXES`); omitted parameters are unitless numbers or text.
     metrics : the metrics to aggregate, with display units.
     default_block_size : trials per block (small for expensive trials).
+    limits : parameter -> (lowest, highest) allowed, in the study-file unit (None: open), so
+        that a value no trial could use is refused when the study is loaded.
+    choices : parameter -> the texts a text parameter may take.
     """
 
     name: str
@@ -59,6 +62,8 @@ class ParamSystem:
     units: Mapping[str, str]
     metrics_: tuple[Metric, ...]
     default_block_size: int = 256
+    limits: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
+    choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def key(self, param: str) -> str:
         """The study-file key of a parameter: its name and unit suffix."""
@@ -71,8 +76,11 @@ class ParamSystem:
         for param, default in self.defaults.items():
             scale = SUFFIXES[self.units.get(param, "")]
             value = float(default) / scale if isinstance(default, float) else default
-            kind = float if isinstance(default, float) else type(default)
-            fields[self.key(param)] = (kind, value)
+            kind: Any = float if isinstance(default, float) else type(default)
+            if param in self.choices:
+                kind = Literal[self.choices[param]]  # type: ignore[valid-type]
+            low, high = self.limits.get(param, (None, None))
+            fields[self.key(param)] = (kind, Field(default=value, ge=low, le=high))
         params = create_model(f"{self.name}_params", __base__=Strict, **fields)
         return create_model(f"{self.name}_config", __base__=Strict, params=(params, params()))
 

@@ -168,5 +168,14 @@ STABILIZATION = ParamSystem(
         Metric("residual_rms", "image residual RMS", "px", 1.0),
     ),
     default_block_size=32,
+    limits={"duration": (1.0, 3600.0), "rate": (1.0, 10000.0),
+            "misalignment_min": (0.0, 10.0), "misalignment_max": (0.0, 10.0),
+            "rock_amplitude": (0.0, 45.0),
+            **dict.fromkeys(("rock_freq_yaw", "rock_freq_pitch", "rock_freq_roll"),
+                            (1e-3, 50.0)),
+            "aim_azimuth": (-360.0, 360.0), "aim_pitch": (-80.0, 80.0),
+            "image_noise": (1e-6, 100.0), "gyro_noise": (0.0, 10.0), "gyro_bias": (0.0, 1e3),
+            "fov": (0.01, 90.0), "pixels": (1.0, 1e5), "forgetting": (0.5, 1.0),
+            "max_passes": (1.0, 100.0)},
 )
 """Seed 001: gyro indirect stabilisation installation angles, as a study system."""
