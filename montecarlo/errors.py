@@ -7,4 +7,8 @@ class InputError(Exception):
 
 class RunInterrupted(Exception):
     """A run stopped before it finished (Ctrl-C, or no worker left); the message says what is
-    kept and how to resume."""
+    kept and how to resume. ``code`` is the exit code: 130 after Ctrl-C, 1 otherwise."""
+
+    def __init__(self, message: str, code: int = 130):
+        super().__init__(message)
+        self.code = code

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 from montecarlo.engine import accumulate
@@ -189,3 +191,22 @@ def test_accumulate_equals_reference_aggregation():
         assert stats[r, 1] == pytest.approx(mean, rel=1e-12)
         assert stats[r, 2] == pytest.approx(m2, rel=1e-10)
         assert (stats[r, 3], stats[r, 4]) == (ref.minimum, ref.maximum)
+
+
+@settings(max_examples=300, deadline=None)
+@given(n=st.integers(1, 5000), p=st.floats(0.001, 0.999), q=st.floats(0.0001, 0.9999))
+def test_binomial_quantile_equals_scipy_binom_ppf(n, p, q):
+    k = agg.binomial_quantile(q, n, p)
+    # at an exact tie CDF(k) = q both answers are within rounding; those are tested below
+    assume(all(abs(stats.binom.cdf(j, n, p) - q) > 1e-9 for j in (k - 1, k)))
+    assert k == int(stats.binom.ppf(q, n, p))
+
+
+@pytest.mark.parametrize("n", [1, 39, 41, 401])
+def test_binomial_quantile_at_an_exact_tie(n):
+    """p = q = 1/2, odd n: CDF((n - 1) / 2) is exactly 1/2 (exact rational arithmetic)."""
+    from fractions import Fraction
+
+    k = (n - 1) // 2
+    assert sum(Fraction(math.comb(n, j), 2**n) for j in range(k + 1)) == Fraction(1, 2)
+    assert agg.binomial_quantile(0.5, n, 0.5) == k

@@ -34,7 +34,7 @@ def test_air_text_names_every_metric():
 
 
 def test_transfer_alignment_json_has_the_five_grades():
-    out = run_cli("transfer-alignment", "--json", "--runs", "5", "--duration", "20")
+    out = run_cli("transfer-alignment", "--json", "--trials", "5", "--duration-s", "20")
     assert out.returncode == 0, out.stderr
     rows = json.loads(out.stdout)["rows"]
     assert [(r["gyro_deg_h"], r["accel_g"]) for r in rows] == [
@@ -44,7 +44,7 @@ def test_transfer_alignment_json_has_the_five_grades():
 
 
 @pytest.mark.parametrize("args", [["air", "--trials", "0"], ["air", "--bogus"],
-                                  ["transfer-alignment", "--duration", "0.01"],
+                                  ["transfer-alignment", "--duration-s", "0.01"],
                                   ["transfer-alignment", "--manoeuvre", "loop"]])
 def test_bad_flags_exit_2_with_one_line(args):
     out = run_cli(*args)

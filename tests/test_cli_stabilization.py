@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-SHORT = ["--duration", "20", "--rate", "50"]
+SHORT = ["--duration-s", "20", "--rate-hz", "50"]
 TRUTH_ARCMIN = {"delta_px": 24.0, "delta_gx": 30.0, "delta_gy": -18.0, "delta_z": -78.0,
                 "delta_py": 0.0}  # simulate's defaults: dg = (30, -18, 42), dp = (24, 0, -36)
 

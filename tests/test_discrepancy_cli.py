@@ -10,7 +10,7 @@ from montecarlo.cli import main
 
 FIXED_KEYS = {"system", "detected", "named_effects", "confounded_groups", "absorbed", "gap",
               "rms_unit"}
-GROUND = ["--fov-deg", "90", "90", "--pixels", "512", "512", "--pixel-sigma", "0.3",
+GROUND = ["--fov-deg", "90", "90", "--pixels", "512", "512", "--pixel-sigma-px", "0.3",
           "--survey-sigma-m", "0.01"]
 
 

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from montecarlo.engine import aggregate as agg
+from montecarlo.engine import runner
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.geometry.camera import Camera
 from montecarlo.geometry.rotations import mounting_matrix
@@ -98,7 +99,7 @@ def test_kernel_invalid_paths_match_reference():
     assert {0, 8, 16} <= seen and seen & {32, 64, 96, 128}  # several reasons exercised
 
 
-def test_runner_fast_path_agrees_with_reference_path(tmp_path):
+def test_runner_fast_path_agrees_with_reference_path(tmp_path, monkeypatch):
     p = tmp_path / "s.toml"
     p.write_text(textwrap.dedent("""
         [study]
@@ -126,9 +127,11 @@ def test_runner_fast_path_agrees_with_reference_path(tmp_path):
         "errors.pixel_relation" = ["common", "independent", 0.3]
     """))
     study = load_study(p)
+    monkeypatch.setattr(runner, "REFERENCE_BELOW", 0.0)  # the kernel even for a small study
     fast = run_study(study, RunOptions(progress=False, checkpoint_dir=tmp_path / "a"))
     ref = run_study(study, RunOptions(progress=False, checkpoint_dir=tmp_path / "b",
                                       reference=True))
+    assert (fast.kernel, ref.kernel) == ("fast", "reference")
     a, b = fast.to_frame(), ref.to_frame()
     counts = [c for c in a.columns if c == "count" or c.startswith("invalid")]
     pd.testing.assert_frame_equal(a[counts], b[counts])

@@ -8,7 +8,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "montecarlo"
 
 LAYERS = (
-    ("units", "errors", "lsq"),
+    ("units", "errors", "lsq", "jit"),
     ("geometry",),
     ("seed000", "seed001", "seed003"),
     ("io",),
@@ -18,8 +18,8 @@ LAYERS = (
     ("output",),
     ("design",),
     ("tools",),
-    ("cli",),
-    ("__init__", "__main__", "api"),
+    ("cli", "api"),
+    ("__init__", "__main__"),
 )
 """Bottom to top. Folders on one line are peers: they import neither each other nor above."""
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -1,5 +1,6 @@
 """The study runner: reproducibility across jobs, chunks and backends; resume; Table 1 path."""
 
+import math
 import os
 import signal
 import subprocess
@@ -12,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from montecarlo.engine import runner
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.seed000 import table1
 from montecarlo.systems import load_study
@@ -59,15 +61,34 @@ def small_study(tmp_path_factory):
     return load_study(p)
 
 
-def _summary(study, tmp_path, **kw):
+@pytest.fixture(scope="module", params=["fast", "reference"])
+def kernel(request):
+    """Both paths, each through workers: this study is small enough that the runner would
+    otherwise keep it in process on the reference path."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(runner, "REFERENCE_BELOW", 0.0 if request.param == "fast" else math.inf)
+        mp.setattr(runner, "IN_PROCESS", 0.0)
+        yield request.param
+
+
+def _summary(study, tmp_path, kernel=None, **kw):
     ck = tmp_path / f"ck-{len(list(tmp_path.iterdir()))}"
     opts = RunOptions(progress=False, checkpoint_dir=ck, **kw)
-    return run_study(study, opts).to_frame()
+    result = run_study(study, opts)
+    assert kernel is None or result.kernel == kernel
+    return result.to_frame()
 
 
 @pytest.fixture(scope="module")
-def reference(small_study, tmp_path_factory):
-    return _summary(small_study, tmp_path_factory.mktemp("ref"), n_jobs=1)
+def reference(small_study, kernel, tmp_path_factory):
+    return _summary(small_study, tmp_path_factory.mktemp("ref"), kernel, n_jobs=1)
+
+
+def test_small_studies_run_the_reference_path_large_ones_the_kernel(small_study):
+    assert runner.uses_reference(small_study, RunOptions())
+    big = load_study(small_study.path, trials=10**6)
+    assert not runner.uses_reference(big, RunOptions())
+    assert runner.uses_reference(big, RunOptions(reference=True))
 
 
 @pytest.mark.parametrize("kw", [
@@ -76,13 +97,13 @@ def reference(small_study, tmp_path_factory):
     {"n_jobs": 2, "chunk_size": 1500},
     {"n_jobs": 1, "chunk_size": 3000},
 ])
-def test_bit_identical_for_any_jobs_and_chunks(small_study, reference, tmp_path, kw):
-    pd.testing.assert_frame_equal(_summary(small_study, tmp_path, **kw), reference,
+def test_bit_identical_for_any_jobs_and_chunks(small_study, kernel, reference, tmp_path, kw):
+    pd.testing.assert_frame_equal(_summary(small_study, tmp_path, kernel, **kw), reference,
                                   check_exact=True)
 
 
-def test_bit_identical_on_dask_local_cluster(small_study, reference, tmp_path):
-    got = _summary(small_study, tmp_path, n_jobs=2, backend="dask", chunk_size=1000)
+def test_bit_identical_on_dask_local_cluster(small_study, kernel, reference, tmp_path):
+    got = _summary(small_study, tmp_path, kernel, n_jobs=2, backend="dask", chunk_size=1000)
     pd.testing.assert_frame_equal(got, reference, check_exact=True)
 
 

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from montecarlo import __version__
 from montecarlo.cli import collimation, design, diagnose, seed000, stabilization, study
-from montecarlo.cli.common import EXIT_BAD_INPUT, Parser
+from montecarlo.cli.common import EXIT_BAD_INPUT, Parser, verbosity
 from montecarlo.errors import InputError, RunInterrupted
 
 GROUPS = (study, seed000, collimation, stabilization, diagnose, design)
@@ -47,13 +47,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     log.setLevel(logging.INFO)
     try:
         args = build_parser().parse_args(argv)
+        log.setLevel(verbosity(args))
         return args.func(args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except RunInterrupted as exc:
         print(f"stopped: {exc}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return exc.code
     except KeyboardInterrupt:
         print("stopped: interrupted; nothing was written", file=sys.stderr)
         return EXIT_INTERRUPTED

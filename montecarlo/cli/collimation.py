@@ -3,19 +3,20 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from montecarlo.cli.common import (
     Parser,
+    add_json_option,
+    check_json_option,
+    emit_json,
     finite,
     nonnegative,
     nonnegative_int,
     positive,
     write_provenance,
-    write_text,
 )
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
@@ -31,8 +32,7 @@ def _cmd_collimation_fit(args: argparse.Namespace) -> int:
     from montecarlo.seed003.fit import NotSeparable, fit, min_mirrors
     from montecarlo.seed003.model import BASE_EFFECTS, parameter_names
 
-    if args.json:
-        writable_file(args.json)
+    check_json_option(args)
     effects = BASE_EFFECTS + (("frame_misalignment",) if args.fit_frame_tilt else ())
     n = len(parameter_names(effects))
     readings = read_mirror_csv(args.data, min_mirrors(n), f"{n} parameters")
@@ -43,12 +43,13 @@ def _cmd_collimation_fit(args: argparse.Namespace) -> int:
     except NotSeparable as exc:
         raise InputError(f"{args.data}: {exc}") from None
     report = fit_report(readings, result, str(args.data))
-    if args.json:
+    if args.json is not None:
         from montecarlo.output.provenance import provenance
 
         record = provenance("collimation fit", input=str(args.data),
                             angle_sigma_arcsec=args.angle_sigma_arcsec, effects=list(effects))
-        write_text(args.json, json.dumps({**report, "provenance": record}, indent=2) + "\n")
+        if emit_json(args, {**report, "provenance": record}):
+            return 0
     print(format_report(report))
     return 0
 
@@ -102,7 +103,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p = csub.add_parser("fit", help="fit the optical-axis offsets to a calibration CSV")
     p.add_argument("data", help="CSV: mirror, set, theodolite_az_deg, theodolite_el_deg, "
                    "ins_az_deg, ins_el_deg[, ins_roll_deg]")
-    p.add_argument("--json", metavar="OUT.json", help="also write the results as JSON")
+    add_json_option(p, "the offsets, residuals and corrected readings")
     p.add_argument("--angle-sigma-arcsec", type=positive, metavar="S",
                    help="known sigma of each heading/pitch residual (default: from residuals)")
     p.add_argument("--fit-frame-tilt", action="store_true",

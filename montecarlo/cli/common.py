@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from montecarlo.errors import InputError
 from montecarlo.io.files import atomic_write_bytes
@@ -15,10 +17,67 @@ EXIT_BAD_INPUT = 2
 
 
 class Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line (no usage block), exit code 2."""
+    """ArgumentParser whose errors are one line (no usage block), exit code 2.
+
+    Every command (and the program itself) takes ``-q/--quiet`` (warnings and errors only, no
+    progress bars) and ``-v/--verbose`` (debugging detail); see :func:`verbosity`.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                          help="only warnings and errors, no progress bars")
+        self.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                          help="more detail")
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise InputError(f"{self.prog}: {message}")
+
+
+def verbosity(args: argparse.Namespace) -> int:
+    """The logging level the -q/-v flags ask for."""
+    if getattr(args, "verbose", False):
+        return logging.DEBUG
+    return logging.WARNING if getattr(args, "quiet", False) else logging.INFO
+
+
+def quiet(args: argparse.Namespace) -> bool:
+    return bool(getattr(args, "quiet", False))
+
+
+def add_n_jobs_option(p: argparse.ArgumentParser) -> None:
+    """``--n-jobs N``; by default the cores, and small work runs in the calling process."""
+    p.add_argument("--n-jobs", type=positive_int, metavar="N",
+                   help="workers (default: the cores; small work runs in this process)")
+
+
+def add_json_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--json [PATH]``: print ``what`` as JSON instead of text, or also write it to PATH."""
+    p.add_argument("--json", nargs="?", const="-", metavar="PATH",
+                   help=f"{what} as JSON: printed instead of the text, or written to PATH "
+                   "(the text is printed too)")
+
+
+def check_json_option(args: argparse.Namespace) -> None:
+    """Refuse, before any work, a --json file that cannot be written."""
+    from montecarlo.io.files import writable_file
+
+    if getattr(args, "json", None) not in (None, "-"):
+        writable_file(args.json)
+
+
+def emit_json(args: argparse.Namespace, data: Any) -> bool:
+    """Print or write ``data`` as --json asks; True if it was printed (skip the text)."""
+    import json
+
+    if args.json is None:
+        return False
+    text = json.dumps(data, indent=2, default=str) + "\n"
+    if args.json == "-":
+        print(text, end="")
+        return True
+    write_text(args.json, text)
+    return False
 
 
 def number(kind: type[int] | type[float], *, low: float | None = None,

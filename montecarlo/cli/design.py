@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from montecarlo.cli.common import (
+    add_n_jobs_option,
     float_of,
     knob_assignment,
     nonnegative_int,
@@ -156,7 +157,7 @@ def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--relations", nargs="+", choices=("common", "independent"),
                    default=["common", "independent"], help="pixel-noise relations (both)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
-    p.add_argument("--n-jobs", type=positive_int, default=2, help="parallel workers (2)")
+    add_n_jobs_option(p)
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from typing import TYPE_CHECKING
 
@@ -11,6 +10,10 @@ import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    add_json_option,
+    add_n_jobs_option,
+    check_json_option,
+    emit_json,
     field_of_view,
     finite,
     nonnegative,
@@ -38,8 +41,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before any work, a --report directory or --json file that cannot be written."""
     if args.report:
         OutputDir(args.report, "diagnose").check()
-    if args.json:
-        writable_file(args.json)
+    check_json_option(args)
 
 
 def _check_files(args: argparse.Namespace) -> None:
@@ -65,9 +67,8 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
                 if args.trials > 0 else None
             write_report(staging, d, view, report, mc, args.trials, args.seed)
             write_provenance(staging, "diagnose", **record)
-    if args.json:
-        write_text(args.json, json.dumps({**report, "provenance": provenance(
-            "diagnose", **record)}, indent=2) + "\n")
+    if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
+        return 0
     print(format_text(report))
     if args.report:
         print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
@@ -92,7 +93,7 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
                            "parameters of an effect + 1 degree of freedom, 2 image coordinates "
                            "per row")
     ge.check_in_front(data, camera, str(args.data))
-    sigma, survey = args.pixel_sigma, args.survey_sigma_m
+    sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
         d = diagnose(ge.ground_problem(data, camera, sigma, survey), args.alpha)
     except FitError as exc:
@@ -139,7 +140,7 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
     mounting = dict(zip(("psi", "theta", "gamma"), map(math.radians, args.mounting_deg),
                         strict=True))
     data, truth, dropped = synth.synth_ground(
-        seed=args.seed, camera=camera, pixel_sigma=args.pixel_sigma,
+        seed=args.seed, camera=camera, pixel_sigma=args.pixel_sigma_px,
         survey_sigma=args.survey_sigma_m, mounting=mounting, ranges=args.ranges_m,
         grid=tuple(args.grid), spread=args.spread, duration=args.duration_s,
         sessions=args.sessions, effects=effects, at_mdb=at_mdb,
@@ -149,7 +150,7 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
     write_ground_csv(args.out, data)
     if args.truth:
         write_text(args.truth, synth.truth_report(
-            "ground", args.seed, truth, ge.display_unit, pixel_sigma=args.pixel_sigma,
+            "ground", args.seed, truth, ge.display_unit, pixel_sigma=args.pixel_sigma_px,
             survey_sigma_m=args.survey_sigma_m, dropped_targets=dropped))
     shown = {k: v / ge.display_unit(k)[1] for k, v in truth.items()
              if k not in ("psi", "theta", "gamma") and v != 0.0}
@@ -199,7 +200,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     dsub = diag.add_subparsers(dest="diagnose_command", required=True, parser_class=Parser)
 
     def common(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--json", metavar="OUT.json", help="write the diagnosis as JSON")
+        add_json_option(p, "the diagnosis")
         p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and "
                        "plots (residuals, gap, Monte Carlo of the residual statistic)")
         p.add_argument("--alpha", type=probability, default=0.01,
@@ -208,8 +209,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        help="Monte Carlo data sets per model in --report (default 200; 0: none)")
         p.add_argument("--seed", type=nonnegative_int, default=0,
                        help="seed of the --report Monte Carlo (default 0)")
-        p.add_argument("--n-jobs", type=positive_int, default=1,
-                       help="workers of the --report Monte Carlo (default 1)")
+        add_n_jobs_option(p)
 
     p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")
     p.add_argument("data", help="CSV: target, x_m, y_m, z_m, px, pz[, t_s][, session]")
@@ -217,7 +217,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="full fields of view about z (yaw) and x (pitch) [deg]")
     p.add_argument("--pixels", type=positive_int, nargs=2, required=True,
                    metavar=("NX", "NZ"), help="pixel counts across x and z")
-    p.add_argument("--pixel-sigma", type=positive, required=True, metavar="S",
+    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
                    help="standard deviation of each image coordinate [px]")
     p.add_argument("--survey-sigma-m", type=nonnegative, default=0.0, metavar="S",
                    help="standard deviation of each surveyed coordinate [m] (default 0)")
@@ -250,7 +250,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     effect_options(p)
     p.add_argument("--fov-deg", type=field_of_view, nargs=2, default=[90.0, 90.0])
     p.add_argument("--pixels", type=positive_int, nargs=2, default=[512, 512])
-    p.add_argument("--pixel-sigma", type=nonnegative, default=0.3, help="[px] (0.3)")
+    p.add_argument("--pixel-sigma-px", type=nonnegative, default=0.3, help="[px] (0.3)")
     p.add_argument("--survey-sigma-m", type=nonnegative, default=0.01, help="[m] (0.01)")
     p.add_argument("--mounting-deg", type=finite, nargs=3, default=[30.0, 20.0, 10.0],
                    metavar=("PSI", "THETA", "GAMMA"), help="true mounting (seed 000: 30 20 10)")

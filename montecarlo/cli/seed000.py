@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 from montecarlo.cli.common import (
+    add_json_option,
+    check_json_option,
+    emit_json,
     finite,
     nonnegative_int,
+    positive,
     positive_int,
 )
 from montecarlo.errors import InputError
@@ -18,11 +21,9 @@ from montecarlo.units import MRAD
 def _cmd_table1(args: argparse.Namespace) -> int:
     from montecarlo.seed000 import table1
 
+    check_json_option(args)
     table = table1.reproduce_table1()
-    if args.json:
-        rows = table[list(table1.JSON_KEYS)].to_dict(orient="records")
-        print(json.dumps(rows, indent=2))
-    else:
+    if not emit_json(args, table[list(table1.JSON_KEYS)].to_dict(orient="records")):
         print(table1.format_table1(table))
     return 0
 
@@ -30,8 +31,9 @@ def _cmd_table1(args: argparse.Namespace) -> int:
 def _cmd_air(args: argparse.Namespace) -> int:
     from montecarlo.seed000 import air
 
+    check_json_option(args)
     table = air.reproduce_paper(n=args.trials, rng=args.seed)
-    if args.json:
+    if args.json is not None:
         out = {
             "paper_mrad": {"one_sigma": air.PAPER_1SIGMA / MRAD,
                            "three_sigma": air.PAPER_3SIGMA / MRAD},
@@ -42,20 +44,20 @@ def _cmd_air(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "rows": table.to_dict(orient="records"),
         }
-        print(json.dumps(out, indent=2))
-    else:
-        print(air.format_reproduction(table))
+        if emit_json(args, out):
+            return 0
+    print(air.format_reproduction(table))
     return 0
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("table1", help="reproduce seed 000, Table 1 and compare with the paper")
-    p.add_argument("--json", action="store_true", help="print a JSON list of six rows")
+    add_json_option(p, "the six rows")
     p.set_defaults(func=_cmd_table1)
 
     p = sub.add_parser("air", help="seed 000, section 2: reproduce 1.70 / 5.10 mrad of the air "
                        "dynamic calibration with every rotation metric")
-    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    add_json_option(p, "every statistic of every reading")
     p.add_argument("--trials", type=positive_int, default=200_000,
                    help="Monte Carlo trials per reading (default 200000)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
@@ -67,17 +69,16 @@ def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
     from montecarlo.seed000 import table2
     from montecarlo.seed000 import transfer_alignment as ta
 
+    check_json_option(args)
     try:
-        cfg = ta.AlignmentConfig(manoeuvre=args.manoeuvre, duration=args.duration,
-                                 bank=math.radians(args.bank), period=args.period,
+        cfg = ta.AlignmentConfig(manoeuvre=args.manoeuvre, duration=args.duration_s,
+                                 bank=math.radians(args.bank_deg), period=args.period_s,
                                  attitude_matching=args.attitude_matching)
     except ValueError as exc:
         raise InputError(f"montecarlo transfer-alignment: {exc}") from None
-    table = table2.table2_grid(cfg, rng=args.seed, runs=args.runs)
-    if args.json:
-        print(json.dumps({"config": table2.describe(cfg), "seed": args.seed,
-                          "rows": table.to_dict(orient="records")}, indent=2))
-    else:
+    table = table2.table2_grid(cfg, rng=args.seed, runs=args.trials)
+    if not emit_json(args, {"config": table2.describe(cfg), "seed": args.seed,
+                            "rows": table.to_dict(orient="records")}):
         print(table2.format_table2(table, cfg))
     return 0
 
@@ -85,18 +86,18 @@ def _cmd_transfer_alignment(args: argparse.Namespace) -> int:
 def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("transfer-alignment", help="seed 000, Table 2: Kalman-filter transfer "
                        "alignment for the five IMU grades, paper vs ours")
-    p.add_argument("--json", action="store_true", help="print JSON instead of text")
-    p.add_argument("--runs", type=positive_int, default=100,
-                   help="Monte Carlo runs per IMU grade (default 100)")
+    add_json_option(p, "the five rows")
+    p.add_argument("--trials", type=positive_int, default=100,
+                   help="Monte Carlo runs of the filter per IMU grade (default 100)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
     p.add_argument("--manoeuvre", default="s_turn",
                    help="flight profile: s_turn (default), wing_rock or level")
-    p.add_argument("--duration", type=finite, default=120.0,
+    p.add_argument("--duration-s", type=positive, default=120.0,
                    help="alignment time [s] (default 120)")
-    p.add_argument("--bank", type=finite, default=30.0,
+    p.add_argument("--bank-deg", type=finite, default=30.0,
                    help="peak bank of the S-turn, roll amplitude of the wing rock [deg] "
                    "(default 30)")
-    p.add_argument("--period", type=finite, default=60.0,
+    p.add_argument("--period-s", type=positive, default=60.0,
                    help="period of the S-turn or the wing rock [s] (default 60)")
     p.add_argument("--attitude-matching", action="store_true",
                    help="add attitude matching to velocity matching")

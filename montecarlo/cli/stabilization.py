@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 
 import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    add_json_option,
+    check_json_option,
+    emit_json,
     field_of_view,
     finite,
     nonnegative_int,
@@ -36,7 +38,7 @@ def _stabilization_setup(args: argparse.Namespace):
 
     rocking = Rocking(np.radians(args.rock_amp_deg), args.rock_freq_hz,
                            np.radians(args.rock_phase_deg))
-    setup = Setup(duration=args.duration, rate=args.rate,
+    setup = Setup(duration=args.duration_s, rate=args.rate_hz,
                        aim_azimuth=np.radians(args.aim_deg[0]),
                        aim_pitch=np.radians(args.aim_deg[1]), camera=_stabilization_camera(args),
                        image_noise=args.image_noise_px,
@@ -69,7 +71,7 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     from montecarlo.io.stabilization_csv import read_csv
     from montecarlo.seed001.estimate import PARAMETER_NAMES, estimate
 
-
+    check_json_option(args)
     record = read_csv(args.csv)
     est = estimate(record.t, record.gyro, record.eta, record.eps, record.los_px,
                       _stabilization_camera(args), args.image_noise_px,
@@ -78,10 +80,10 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     units = [ARCMIN] * 5 + [DEG_PER_HOUR] * 3
     rows = {name: (float(v / u), float(s / u)) for name, v, s, u in
             zip(PARAMETER_NAMES, est.values, est.sigma, units, strict=True)}
-    if args.json:
+    if args.json is not None:
         from montecarlo.output.provenance import provenance
 
-        print(json.dumps({
+        if emit_json(args, {
             "file": str(args.csv), "rows": int(record.t.size), "passes": est.passes,
             "converged": bool(est.converged), "residual_rms_px": float(est.residual_rms),
             "units": {"delta_*": "arcmin", "bias_*": "deg/h", "sigma": "1 standard deviation"},
@@ -90,8 +92,8 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
                                      image_noise_px=args.image_noise_px,
                                      gyro_arw_deg_per_rt_h=args.gyro_arw_deg_per_rt_h,
                                      forgetting=args.forgetting, passes=args.passes),
-        }, indent=2))
-        return 0
+        }):
+            return 0
     if args.passes == 1:
         state = "the patent's single linear pass about zero (error ~ angles squared)"
     else:
@@ -132,8 +134,8 @@ def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
 
 
 def _add_stabilization_profile(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=positive, default=60.0, help="run length [s] (60)")
-    p.add_argument("--rate", type=positive, default=100.0,
+    p.add_argument("--duration-s", type=positive, default=60.0, help="run length [s] (60)")
+    p.add_argument("--rate-hz", type=positive, default=100.0,
                    help="gyro, gimbal-loop and camera frame rate [Hz] (100)")
     p.add_argument("--rock-amp-deg", type=finite, nargs=3, default=[5.0, 5.0, 5.0],
                    metavar=("YAW", "PITCH", "ROLL"), help="rocking amplitudes [deg] (5 5 5)")
@@ -187,7 +189,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                      help="RLS forgetting factor in (0, 1] (1: none)")
     est.add_argument("--passes", type=positive_int, default=10,
                      help="most RLS passes (1: the patent's single linear pass) (10)")
-    est.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    add_json_option(est, "the estimates")
     est.set_defaults(func=_cmd_stabilization_estimate)
 
     obs = ssub.add_parser("observability", help="rank and Cramer-Rao bounds of a rocking "

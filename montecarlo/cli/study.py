@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import json
-import logging
 from pathlib import Path
 
 from montecarlo.cli.common import (
+    add_json_option,
+    add_n_jobs_option,
+    check_json_option,
+    emit_json,
     nonnegative_int,
     positive_int,
+    quiet,
 )
 
 
@@ -19,12 +22,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.io.files import OutputDir
     from montecarlo.systems import load_study
 
-    if args.quiet:
-        logging.getLogger("montecarlo").setLevel(logging.WARNING)
     study = load_study(args.study, trials=args.trials, seed=args.seed)
     out = Path(args.out) if args.out else Path("results") / study.header.name
     options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
-                         chunk_size=args.chunk_size, progress=not args.quiet,
+                         chunk_size=args.chunk_size, progress=not quiet(args),
                          checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
     checked_options(study, options)  # before any directory is made
     with OutputDir(out, "run", {"study": study.header.name}) as staging:
@@ -47,7 +48,7 @@ def _cmd_nightly(args: argparse.Namespace) -> int:
     from montecarlo.tools.nightly import run_nightly
 
     passed, checks = run_nightly(Path(args.studies), Path(args.out), args.n_jobs,
-                                 progress=not args.quiet)
+                                 progress=not quiet(args))
     for c in checks:
         print(f"{'pass' if c.passed else 'FAIL'}  {c.name}: {c.value} (expected {c.expected})")
     print(f"nightly: {sum(c.passed for c in checks)}/{len(checks)} checks pass; "
@@ -58,15 +59,17 @@ def _cmd_nightly(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from montecarlo.tools.bench import format_bench, run_bench
 
+    check_json_option(args)
     result = run_bench(quick=args.quick, repeats=args.repeats)
-    print(json.dumps(result, indent=2) if args.json else format_bench(result))
+    if not emit_json(args, result):
+        print(format_bench(result))
     return 0
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a study file and write results/<study>/")
     p.add_argument("study", help="study definition (TOML), e.g. studies/table1.toml")
-    p.add_argument("--n-jobs", type=positive_int, default=2, help="parallel workers (2)")
+    add_n_jobs_option(p)
     p.add_argument("--backend", choices=("loky", "dask"), default="loky",
                    help="loky: local processes; dask: a dask.distributed cluster")
     p.add_argument("--scheduler", help="dask scheduler address (default: start a LocalCluster)")
@@ -75,7 +78,6 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="output directory (default results/<study name>)")
     p.add_argument("--chunk-size", type=positive_int,
                    help="trials per task, a multiple of the block size (results do not change)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--reference", action="store_true",
                    help="use the literal reference implementation instead of the fast kernel")
     p.set_defaults(func=_cmd_run)
@@ -83,12 +85,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("nightly", help="rerun Table 1 and the trend checks; exit 1 on regression")
     p.add_argument("--studies", default="studies", help="directory with table1.toml, trends.toml")
     p.add_argument("--out", default="results/nightly", help="output directory")
-    p.add_argument("--n-jobs", type=positive_int, default=2)
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_n_jobs_option(p)
     p.set_defaults(func=_cmd_nightly)
 
     p = sub.add_parser("bench", help="trials per second of the reference and fast ground paths")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    add_json_option(p, "every figure")
     p.add_argument("--quick", action="store_true", help="small sizes (seconds, for tests)")
     p.add_argument("--repeats", type=positive_int, default=5, help="timed runs per figure (5)")
     p.set_defaults(func=_cmd_bench)

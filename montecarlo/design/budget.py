@@ -260,7 +260,7 @@ class BudgetResult:
 
 def budget(base: Mapping[str, Any], requirement: Requirement, relation: str,
            point: Mapping[str, float] | None = None, *, samples: int = 8192, seed: int = 0,
-           trials: int = 20000, resamples: int = 200, n_jobs: int = 2,
+           trials: int = 20000, resamples: int = 200, n_jobs: int | None = None,
            block_size: int = 4096) -> BudgetResult:
     """Sobol indices of every random error source and the budget table at a design point.
 

@@ -430,7 +430,7 @@ def _evaluate_slice(problem: SizingProblem, rs: RelationSizing, options: SizingO
 
 
 def confirm(problem: SizingProblem, relation: str, answer: Mapping[str, Any], *, trials: int,
-            seed: int, block_size: int = 2048, n_jobs: int = 2) -> pd.DataFrame:
+            seed: int, block_size: int = 2048, n_jobs: int | None = None) -> pd.DataFrame:
     """Independent run (``seed``) at the answer and 10 % cheaper in its limiting knob.
 
     Returns rows ``role`` = "answer" (should meet) and "cheaper" (should fail), with the

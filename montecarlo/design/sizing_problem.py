@@ -191,7 +191,7 @@ class SizingOptions:
     order: tuple[str, ...] | None = None
     """Lexicographic cost: minimise the doublings of these knobs in this order (else weights)."""
     block_size: int = 2048
-    n_jobs: int = 2
+    n_jobs: int | None = None
     slice_levels: int = 6
     """Levels per axis of the plotted slice through the answer (0: no slice)."""
     confirm_trials: int | None = None
@@ -339,7 +339,7 @@ def verdicts(value: np.ndarray, lo: np.ndarray, hi: np.ndarray, invalid: np.ndar
     return np.where(np.asarray(invalid) > 0, "invalid", out).astype(object)
 
 
-def run_statistic(study: Any, requirement: Requirement, n_jobs: int = 2) -> pd.DataFrame:
+def run_statistic(study: Any, requirement: Requirement, n_jobs: int | None = None) -> pd.DataFrame:
     """Run ``study`` with the study runner; per grid point (in order) the requirement's
     statistic ``value``, its interval ``lo``/``hi`` (display unit), ``count``, ``invalid``, the
     ``verdict`` and ``margin_ok`` (meets with the replication margin)."""
@@ -360,7 +360,7 @@ def run_statistic(study: Any, requirement: Requirement, n_jobs: int = 2) -> pd.D
 
 
 def evaluate(problem: SizingProblem, points: Sequence[Mapping[str, float]], relation: str, *,
-             trials: int, seed: int, block_size: int = 2048, n_jobs: int = 2,
+             trials: int, seed: int, block_size: int = 2048, n_jobs: int | None = None,
              name: str = "sizing") -> pd.DataFrame:
     """Run the study runner at the design ``points``: one row each with the knobs and the
     columns of :func:`run_statistic`."""

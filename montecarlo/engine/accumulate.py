@@ -12,6 +12,7 @@ import numba as nb
 import numpy as np
 
 from montecarlo.engine.aggregate import BIN_BASE, BIN_SHIFT, N_MAG, ZERO_BIN
+from montecarlo.jit import cached
 
 _EXPONENT = 0x7FF0000000000000
 _MAGNITUDE = 0x7FFFFFFFFFFFFFFF
@@ -95,3 +96,8 @@ def new_stats(m: int) -> np.ndarray:
     s[:, 3] = np.inf
     s[:, 4] = -np.inf
     return s
+
+
+def is_cached() -> bool:
+    """True if numba's cache holds :func:`accumulate` (else its first use compiles)."""
+    return cached(accumulate)

@@ -106,13 +106,30 @@ def order_statistic_ranks(n: int, p: float, confidence: float) -> tuple[int, int
     probability ``P(r <= B <= s - 1) >= confidence``, B ~ Binomial(n, p). A rank outside
     1..n is returned as 0 or n + 1 (that end of the interval cannot be bounded).
     """
-    from scipy import stats  # main process only (workers never finalise)
-
     alpha = 1.0 - confidence
     k = max(1, math.ceil(p * n - 1e-9))
-    r = int(stats.binom.ppf(alpha / 2.0, n, p))
-    s = int(stats.binom.ppf(1.0 - alpha / 2.0, n, p)) + 1
+    r = binomial_quantile(alpha / 2.0, n, p)
+    s = binomial_quantile(1.0 - alpha / 2.0, n, p) + 1
     return k, r, min(s, n + 1)
+
+
+def binomial_quantile(q: float, n: int, p: float) -> int:
+    """Smallest k with ``P(B <= k) >= q``, B ~ Binomial(n, p) (as ``scipy.stats.binom.ppf``).
+
+    Bisection on the CDF (``scipy.special.bdtr``), which imports in a fraction of the time
+    ``scipy.stats`` takes. A CDF within 1e-12 (relative) of ``q`` counts as reaching it, so
+    that exact ties (n = 41, p = q = 0.5) are not lost to rounding.
+    """
+    from scipy.special import bdtr
+
+    lo, hi = -1, n  # CDF(lo) < q <= CDF(hi) = 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if bdtr(mid, n, p) >= q * (1.0 - 1e-12):
+            hi = mid
+        else:
+            lo = mid
+    return hi
 
 
 COARSE_SHIFT = 5
@@ -375,7 +392,7 @@ class PointStats:
         self._add_counts(other.invalid, other.trials, other.blocks)
 
     def summary(self, signed: dict[str, bool], confidence: float,
-                spec: SpecCheck | None = None) -> pd.DataFrame:
+                spec: SpecCheck | None = None, sampled: bool = True) -> pd.DataFrame:
         """One row per (variant, metric): counts, moments, percentiles with intervals, max.
 
         ``signed[metric]`` True means percentiles and max are of the magnitude |x| (the mean and
@@ -384,6 +401,12 @@ class PointStats:
         one is counted in ``invalid_fraction``. Rows the ``spec`` applies to get ``spec_value``,
         ``spec_lo``, ``spec_hi`` (the statistic over all trials, those without a value counted
         as +inf) and a ``verdict`` (:data:`VERDICTS`).
+
+        ``sampled`` False means the trials enumerate every case (the worst-case corners) rather
+        than sample a distribution (column ``sampling``): statistics are then exact, with no
+        confidence interval. For a spec on the max of a sampled metric, ``spec_coverage`` is the
+        fraction of the population the sampled max bounds with the study's confidence (Wilks:
+        ``(1 - confidence) ** (1 / trials)``).
         """
         import pandas as pd
 
@@ -395,6 +418,7 @@ class PointStats:
             count = m.count
             row = {"variant": variant, "metric": metric,
                    "percentiles_of": "abs" if of_abs else "value", "percentiles_over": "valid",
+                   "sampling": "random" if sampled else "enumerated",
                    "trials": self.trials, "count": count, "invalid": inv.get("total", 0),
                    "invalid_fraction": (self.trials - count) / self.trials if self.trials
                    else math.nan,
@@ -402,20 +426,24 @@ class PointStats:
                    "mean": mean, "std": std}
             for p, tag in zip(PERCENTILES, PERCENTILE_TAGS, strict=True):
                 est, lo, hi = m.quantile(p, of_abs, confidence)
+                if not sampled:
+                    lo = hi = math.nan
                 row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
             row["max"] = m.value_range(of_abs)[1] if count else math.nan
             if spec is not None and spec.applies(variant, metric):
-                row.update(self._judge(m, row, spec, of_abs, confidence))
+                row.update(self._judge(m, row, spec, of_abs, confidence, sampled))
             rows.append(row)
         return pd.DataFrame(rows)
 
     def _judge(self, m: MetricStats, row: dict, spec: SpecCheck, of_abs: bool,
-               confidence: float) -> dict[str, float | str]:
+               confidence: float, sampled: bool) -> dict[str, float | str]:
         """The spec's statistic over all trials (no value = +inf) and the verdict."""
         censored = self.trials - m.count
         stat = spec.statistic
         if stat.startswith("p"):
             value, lo, hi = m.quantile(int(stat[1:]) / 100.0, of_abs, confidence, censored)
+            if not sampled:  # every case enumerated: the statistic is exact
+                lo = hi = value
         else:  # mean, std, max: no interval; any trial without a value fails the spec
             value = math.inf if censored else row[stat]
             lo = hi = value
@@ -427,10 +455,13 @@ class PointStats:
             verdict = "fails"
         else:
             verdict = "undecided"
-        return {"spec_value": value, "spec_lo": lo, "spec_hi": hi, "verdict": verdict}
+        coverage = (1.0 - confidence) ** (1.0 / self.trials) \
+            if stat == "max" and sampled and self.trials else math.nan
+        return {"spec_value": value, "spec_lo": lo, "spec_hi": hi, "verdict": verdict,
+                "spec_coverage": coverage}
 
     def finalize(self, signed: dict[str, bool], confidence: float,
-                 spec: SpecCheck | None = None) -> PointResult:
+                 spec: SpecCheck | None = None, sampled: bool = True) -> PointResult:
         """The compact result of a finished point (the dense histograms are dropped)."""
-        return PointResult(self.summary(signed, confidence, spec),
+        return PointResult(self.summary(signed, confidence, spec, sampled),
                            {k: m.coarse_histogram() for k, m in self.metrics.items()})

@@ -28,10 +28,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-import joblib
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from montecarlo.engine.aggregate import (
     SPEC_COLUMNS,
@@ -53,7 +51,8 @@ log = logging.getLogger("montecarlo")
 class RunOptions:
     """How to run a study (none of this changes the results)."""
 
-    n_jobs: int = 2
+    n_jobs: int | None = None
+    """Local workers (or LocalCluster workers); None: the cores available."""
     backend: Backend = "loky"
     scheduler: str | None = None
     chunk_size: int | None = None
@@ -75,6 +74,8 @@ class StudyResult:
     trials: dict[int, pd.DataFrame] = field(default_factory=dict)
     resumed: dict[str, Any] = field(default_factory=dict)
     """Grid points taken from checkpoints (``points``) and where (``from``, ``key``)."""
+    kernel: str = "reference"
+    """``"fast"`` if the system's compiled kernel computed the trials, else ``"reference"``."""
 
     def _sweep_value(self, key: str, value: Any) -> Any:
         """Sweep values as they go in a column: text if the key mixes numbers and text."""
@@ -127,7 +128,7 @@ def _chunk_blocks(study: Study, points: list[int], options: RunOptions) -> int:
     if options.chunk_size is not None:
         return options.chunk_size // study.block_size
     total_blocks = sum(_n_blocks(study, p) for p in points)
-    return min(MAX_CHUNK_BLOCKS, max(1, math.ceil(total_blocks / (4 * options.n_jobs))))
+    return min(MAX_CHUNK_BLOCKS, max(1, math.ceil(total_blocks / (4 * (options.n_jobs or 1)))))
 
 
 def available_cores() -> int:
@@ -166,10 +167,12 @@ def _watch_workers(client: Any, stop: threading.Event, gone: list[str]) -> None:
 @contextlib.contextmanager
 def _backend(options: RunOptions, gone: list[str]) -> Iterator[int]:
     """Context in which joblib uses the requested backend; yields n_jobs for Parallel."""
+    import joblib
+
     if options.backend == "loky":
         with joblib.parallel_config(backend="loky", inner_max_num_threads=1,
                                     initializer=exit_with_parent, initargs=(os.getpid(),)):
-            yield options.n_jobs
+            yield options.n_jobs or 1
         return
     from distributed import Client, LocalCluster
 
@@ -215,6 +218,10 @@ def checked_options(study: Study, options: RunOptions) -> RunOptions:
         ``n_jobs < 1``, a scheduler without the dask backend or not shaped like an address,
         or a chunk size that is not a multiple of the study's block size.
     """
+    cores = available_cores()
+    if options.n_jobs is None:
+        options = replace(options, n_jobs=cores)
+    assert options.n_jobs is not None
     if options.n_jobs < 1:
         raise InputError(f"--n-jobs: must be at least 1 (got {options.n_jobs})")
     if options.scheduler is not None:
@@ -227,7 +234,6 @@ def checked_options(study: Study, options: RunOptions) -> RunOptions:
     if options.chunk_size is not None and (options.chunk_size <= 0 or options.chunk_size % bs):
         raise InputError(f"--chunk-size: {options.chunk_size} is not a positive multiple of "
                          f"the study's block size {bs}")
-    cores = available_cores()
     if options.scheduler is None and options.n_jobs > cores:
         log.warning("--n-jobs %d: this machine has %d cores; using %d workers",
                  options.n_jobs, cores, cores)
@@ -237,6 +243,48 @@ def checked_options(study: Study, options: RunOptions) -> RunOptions:
 
 ESTIMATE_AFTER = 5.0
 """Seconds of running after which the remaining time of a long run is announced [s]."""
+
+IN_PROCESS = 2.0
+"""Work estimated below this [s] runs in the calling process: starting workers would cost more."""
+
+
+REFERENCE_BELOW = 0.5
+"""A study whose literal reference path is estimated below this [s] runs it rather than the
+compiled kernel, whose loading costs more (the two agree to about 1e-12)."""
+
+
+def estimated_seconds(study: Study, points: list[int], reference: bool) -> float:
+    """Rough single-core time of the trials of ``points`` (the system's cost per trial)."""
+    per_trial = getattr(study.system, "seconds_per_trial", 1e-3)
+    if reference and hasattr(study.system, "accumulate_block"):
+        per_trial *= 20.0  # the literal reference path instead of the fused kernel
+    return per_trial * sum(study.points[p].trials for p in points)
+
+
+def uses_reference(study: Study, options: RunOptions) -> bool:
+    """Whether the trials go through the literal reference path: asked for, per-trial values
+    kept, no fast kernel, or a study so small that loading the kernel would cost more. Decided
+    on the whole study, so that resuming never changes it."""
+    if options.reference or study.header.per_trial \
+            or not hasattr(study.system, "accumulate_block"):
+        return True
+    return estimated_seconds(study, list(range(len(study.points))), True) < REFERENCE_BELOW
+
+
+def _results(study: Study, tasks: Iterator[tuple[int, range]], point_tasks: dict,
+             reference: bool, n_jobs: int | None) -> Iterator[Any]:
+    """(point, stats, kept) of each task: in this process (``n_jobs`` None), or from the
+    workers of the backend entered by the caller."""
+    keep = study.header.per_trial
+    if n_jobs is None:
+        for p, blocks in tasks:
+            yield run_task(point_tasks[p], blocks, keep, reference)
+        return
+    import joblib
+
+    parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
+    yield from parallel(joblib.delayed(run_task)(point_tasks[p], blocks, keep, reference)
+                        for p, blocks in tasks)
 
 
 def run_study(study: Study, options: RunOptions = RunOptions(),
@@ -251,7 +299,6 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     options = checked_options(study, options)
     checkpoints = None if options.checkpoint_dir is None else \
         Checkpoints(Path(options.checkpoint_dir), study, options.reference)
-    keep = study.header.per_trial
     done: dict[int, tuple[PointResult, dict]] = {}
     if checkpoints is not None:
         for gp in study.points:
@@ -276,60 +323,81 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
                                 h.common_random_numbers, study.block_size, study.points[p].trials)
                    for p in todo}
     total = sum(study.points[p].trials for p in todo)
+    reference = uses_reference(study, options)
+    work = estimated_seconds(study, todo, reference)
+    in_process = options.backend == "loky" and (options.n_jobs == 1 or work < IN_PROCESS)
+    note = getattr(study.system, "first_use_note", None)
+    if todo and note is not None and not reference:
+        message = note([study.points[p].prepared for p in todo])
+        if message:
+            log.info("%s: %s", h.name, message)
     gone: list[str] = []
     announced, ran = False, 0
     try:
-        with _backend(options, gone) if todo else contextlib.nullcontext(1) as n_jobs:
-            start = time.monotonic()
+        from tqdm import tqdm
+
+        with contextlib.ExitStack() as stack:
+            # workers (and a dask scheduler) first: a scheduler that does not answer is
+            # reported before any plan or progress bar is shown
+            n_jobs = None if in_process or not todo \
+                else stack.enter_context(_backend(options, gone))
             if todo:
-                log.info("%s: %d of %d grid points to run, %s trials", h.name, len(todo),
-                         len(study.points), f"{total:,}")
-            with tqdm(total=total, unit="trial", unit_scale=True, dynamic_ncols=True,
-                      disable=not options.progress or not todo,
-                      desc=f"{h.name}: {len(todo)}/{len(study.points)} points") as bar:
-                parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-                for point, stats, kept in parallel(
-                        joblib.delayed(run_task)(point_tasks[p], blocks, keep,
-                                                 options.reference)
-                        for p, blocks in _tasks(study, todo, chunk_blocks)):
-                    acc, trials = partial[point]
-                    acc.merge(stats)
-                    trials.update(kept)
-                    remaining[point] -= stats.blocks
-                    bar.update(stats.trials)
-                    ran += stats.trials
-                    elapsed = time.monotonic() - start
-                    if not announced and elapsed > ESTIMATE_AFTER and ran < total:
-                        announced = True
-                        log.info("%s: about %s left at %s trials/s", h.name,
-                                 _duration((total - ran) * elapsed / ran),
-                                 f"{ran / elapsed:,.0f}")
-                    if remaining[point] == 0:
-                        del partial[point]
-                        finished = acc.finalize(signed, h.confidence, check)
-                        if checkpoints is not None:
-                            checkpoints.save(point, finished, trials)
-                        done[point] = (finished, trials)
-                        if on_point is not None:
-                            on_point(point)
+                cores = 1 if in_process else (options.n_jobs or 1)
+                log.info("%s: %d of %d grid points to run, %s trials (%s on %d %s)",
+                         h.name, len(todo), len(study.points), f"{total:,}",
+                         about(work / cores), cores, "core" if cores == 1 else "cores")
+            bar = stack.enter_context(tqdm(
+                total=total, unit="trial", unit_scale=True, dynamic_ncols=True,
+                disable=not options.progress or not todo,
+                desc=f"{h.name}: {len(todo)}/{len(study.points)} points"))
+            start = time.monotonic()
+            for point, stats, kept in _results(study, _tasks(study, todo, chunk_blocks),
+                                               point_tasks, reference, n_jobs):
+                acc, trials = partial[point]
+                acc.merge(stats)
+                trials.update(kept)
+                remaining[point] -= stats.blocks
+                bar.update(stats.trials)
+                ran += stats.trials
+                elapsed = time.monotonic() - start
+                if not announced and elapsed > ESTIMATE_AFTER and ran < total:
+                    announced = True
+                    log.info("%s: %s left at %s trials/s", h.name,
+                             about((total - ran) * elapsed / ran), f"{ran / elapsed:,.0f}")
+                if remaining[point] == 0:
+                    del partial[point]
+                    finished = acc.finalize(signed, h.confidence, check,
+                                            study.points[point].sampled)
+                    if checkpoints is not None:
+                        checkpoints.save(point, finished, trials)
+                    done[point] = (finished, trials)
+                    if on_point is not None:
+                        on_point(point)
     except KeyboardInterrupt:
         saved = len(done) - len(resumed)
         where = f"; rerun the same command to resume from {checkpoints.dir}" \
             if checkpoints is not None and done else ""
         why = gone[0] if gone else "interrupted"
         raise RunInterrupted(f"{h.name}: {why}; {len(done)} of {len(study.points)} grid points "
-                             f"finished ({saved} in this run){where}") from None
+                             f"finished ({saved} in this run){where}",
+                             1 if gone else 130) from None
     points = [done[gp.index][0] for gp in study.points]
     trials = {p: _trials_frame(study, p, done[p][1]) for p in done if done[p][1]}
     origin = {"points": resumed, "from": str(checkpoints.dir), "key": checkpoints.key} \
         if resumed and checkpoints is not None else {}
-    return StudyResult(study, points, trials, origin)
+    return StudyResult(study, points, trials, origin, "reference" if reference else "fast")
 
 
-def _duration(seconds: float) -> str:
+def about(seconds: float) -> str:
+    """An estimated duration: 'about 45 s', 'under a second'."""
+    text = duration_text(seconds)
+    return text if text.startswith("under") else f"about {text}"
+
+
+def duration_text(seconds: float) -> str:
     """A duration for people: 45 s, 12 min, 3.5 h, 2.1 days, 4.0e+03 years."""
     for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
         if seconds >= 2 * size:
             value = seconds / size
             return f"{value:.2g} {unit}" if value < 1e4 else f"{value:.1e} {unit}"
-    return f"{seconds:.0f} s"
+    return f"{seconds:.0f} s" if seconds >= 1 else "under a second"

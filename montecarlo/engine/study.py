@@ -83,6 +83,8 @@ class GridPoint:
     config: Any
     prepared: Any
     trials: int
+    sampled: bool = True
+    """False if the trials enumerate every case (worst-case corners) instead of sampling."""
 
 
 @dataclass(frozen=True)
@@ -318,7 +320,8 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
         values = {k: overrides[k] if k in overrides else _lookup(path, point_raw, k)
                   for k in sweep_keys}
         points.append(GridPoint(i, overrides, values, config, prepared,
-                                system.trials_per_point(prepared, header.trials)))
+                                system.trials_per_point(prepared, header.trials),
+                                system.is_sampled(prepared)))
 
     metrics = tuple(dict.fromkeys(m for p in points for m in system.metrics(p.prepared)))
     if spec is not None:

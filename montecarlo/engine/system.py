@@ -54,9 +54,17 @@ class System(Protocol):
     def trials_per_point(self, prepared: Any, requested: int) -> int:
         """Trials actually run at a grid point (e.g. 2**k for a pure corner enumeration)."""
 
+    def is_sampled(self, prepared: Any) -> bool:
+        """True if trials sample random errors; False if they enumerate every case."""
+
     def simulate_block(self, prepared: Any, streams: Streams, first_trial: int, n: int
                        ) -> tuple[BlockValues, BlockInvalid]:
         """Simulate trials ``first_trial .. first_trial + n - 1`` from the given streams."""
 
     def describe(self, prepared: Any) -> list[str]:
         """Lines stating the assumptions of this config, for reports."""
+
+    seconds_per_trial: float
+    """A rough cost of one trial on one core [s], for planning (in-process or in workers,
+    estimated times). Systems with a fused kernel may also have ``accumulate_block`` and
+    ``first_use_note(prepared_list) -> str | None`` (a compile about to happen)."""

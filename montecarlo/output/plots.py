@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import itertools
 import textwrap
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -17,6 +17,9 @@ from matplotlib.figure import Figure
 
 from montecarlo.engine.runner import StudyResult
 from montecarlo.engine.study import Study
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 KEY_LABELS = {
     "geometry.L_m": ("L", "range L [m]"),
@@ -60,7 +63,9 @@ def short_label(key: str, value: Any) -> str:
         return f"pixel error {value}" if value in ("common", "independent") \
             else f"pixel error ρ={float(value):g}"
     short = KEY_LABELS[key][0] if key in KEY_LABELS else _split_key(key)[0]
-    return f"{short}={_fmt(value)}" if short else _fmt(value)
+    unit = key_label(key).rpartition("[")[2].rstrip("]") if key_label(key).endswith("]") else ""
+    text = f"{_fmt(value)} {unit}" if unit and isinstance(value, (int, float)) else _fmt(value)
+    return f"{short}={text}" if short else text
 
 
 def plot_metric(study: Study) -> str:
@@ -184,10 +189,15 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
                     ax.plot(x, sel["max"], "x", color=color, ms=5)
                 else:
                     ax.plot(x, sel["p95"], "--", color=color, lw=1)
-                err_lo = (sel["p95"] - sel["p95_lo"]).fillna(0.0)
-                err_hi = (sel["p95_hi"] - sel["p95"]).fillna(0.0)
-                ax.errorbar(x, sel["p95"], yerr=[err_lo, err_hi], fmt="none", ecolor=color,
-                            capsize=2, lw=0.8)
+                for xi, yi, bad in zip(x, sel["p50"], sel["invalid_fraction"], strict=True):
+                    if bad >= 0.005:  # trials without a solution: say how many
+                        ax.annotate(f"{bad:.0%} no sol.", (xi, yi), xytext=(3, -9),
+                                    textcoords="offset points", fontsize=6, color="C3")
+                ci = sel["p95_lo"].notna().to_numpy()  # none over enumerated corners
+                err_lo = sel["p95"][ci] - sel["p95_lo"][ci]
+                err_hi = (sel["p95_hi"][ci] - sel["p95"][ci]).fillna(0.0)
+                ax.errorbar(x[ci], sel["p95"][ci], yerr=[err_lo, err_hi], fmt="none",
+                            ecolor=color, capsize=2, lw=0.8)
             if study.spec and study.spec.variant in (None, variant):
                 ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
             title = ", ".join(short_label(k, v) for k, v in zip(row_keys, row, strict=True))
@@ -231,7 +241,9 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         style = ("cases: dot p50, bar to p95 (—), × max" if not numeric
                  else "line p50, band to p95, dotted p99, × max" if few
                  else "solid p50, dashed p95")
-        fig.suptitle(f"{study.header.name}: {m.label}\n{style}; bars: {ci} CI of p95",
+        exact = "" if all(gp.sampled for gp in study.points) \
+            else " (none where the trials enumerate the corners)"
+        fig.suptitle(f"{study.header.name}: {m.label}\n{style}; bars: {ci} CI of p95{exact}",
                      fontsize=9)
         figures.append((f"trend_{key.replace('.', '_')}.png", fig))
     return figures
@@ -263,10 +275,17 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
     nrows = int(np.ceil(len(points) / ncols))
     fig = Figure(figsize=(3.3 * ncols, 2.5 * nrows + 0.5), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    spec = study.spec if study.spec and study.spec.metric == metric else None
+    # panel titles name the keys that differ between the points shown
+    varying = [k for k in study.sweep_keys
+               if len({_fmt(study.points[p].values[k]) for p in points}) > 1]
     for ax, p in zip(axes, points, strict=False):
         # each panel its own range (grid points may differ by orders of magnitude): to 1.5 p99
-        p99 = sel.loc[sel["point"] == p, "p99"].to_numpy(float)
+        rows = sel[sel["point"] == p]
+        p99 = rows["p99"].to_numpy(float)
         xmax = float(np.max(p99[np.isfinite(p99)], initial=0.0)) * 1.5
+        if spec is not None and spec.limit < 3.0 * xmax:
+            xmax = max(xmax, 1.1 * spec.limit)
         if not xmax > 0.0:
             xmax = 1.0
         edges = np.linspace(0.0, xmax, 51)
@@ -275,22 +294,33 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
             if hist is None or hist[2].sum() == 0:
                 continue
             h = _rebin(*hist, m.scale, edges)
-            ax.stairs(h / hist[2].sum(), edges, color=f"C{i}", label=v, fill=i == 0,
-                      alpha=0.35 if i == 0 else 1.0)
+            # fractions of all trials: those without a value are not in any bin
+            ax.stairs(h / result.points[p].summary["trials"].iloc[0], edges, color=f"C{i}",
+                      label=v, fill=i == 0, alpha=0.35 if i == 0 else 1.0)
+            p95 = rows.loc[rows["variant"] == v, "p95"]
+            if len(p95) and np.isfinite(p95.iloc[0]) and p95.iloc[0] <= xmax:
+                ax.axvline(p95.iloc[0], color=f"C{i}", ls="--", lw=0.8,
+                           label="p95" if i == 0 else None)
+        if spec is not None and spec.limit <= xmax:
+            ax.axvline(spec.limit, color="k", ls="-.", lw=1, label=_spec_text(study))
         gp = study.points[p]
-        leaders = [k for k in gp.values if _zip_partners(study)[k][0] == k]
-        title = ", ".join(short_label(k, gp.values[k]) for k in leaders) or f"point {p}"
-        ax.set_title(textwrap.fill(title, 48), fontsize=7)
+        title = ", ".join(short_label(k, gp.values[k]) for k in varying) or f"point {p}"
+        invalid = rows["invalid_fraction"].max()
+        if invalid > 0:
+            title += f"; no solution: {invalid:.1%}"
+        ax.set_title(textwrap.fill(f"{p}: {title}", 52), fontsize=7,
+                     color="C3" if invalid > 0 else "k")
         ax.tick_params(labelsize=7)
     for ax in axes[len(points):]:
         ax.set_visible(False)
-    if variants != ["default"]:
-        axes[0].legend(fontsize=7)
+    labels = axes[0].get_legend_handles_labels()[1]
+    if variants != ["default"] or len(labels) > 1:
+        axes[0].legend(fontsize=6)
     fig.supxlabel(f"{'|' if m.signed else ''}{m.label}{'|' if m.signed else ''} [{m.unit}]",
                   fontsize=9)
     fig.supylabel("fraction of trials", fontsize=9)
-    fig.suptitle(f"{study.header.name}: distribution per grid point (each to 1.5 × its p99)",
-                 fontsize=10)
+    fig.suptitle(f"{study.header.name}: distribution per grid point (each to 1.5 × its p99; "
+                 "dashed: p95)", fontsize=10)
     return fig
 
 
@@ -319,29 +349,45 @@ def lh_map_figure(result: StudyResult, summary: pd.DataFrame) -> Figure | None:
         sel = data
         for k, v in zip(others, combo, strict=True):
             sel = sel[sel[k] == v]
-        grids.append(sel.pivot_table(index=H, columns=L, values=stat))
-    vmin = min(float(np.nanmin(g.to_numpy())) for g in grids)
-    vmax = max(float(np.nanmax(g.to_numpy())) for g in grids)
+        # with a spec: its statistic over all trials, as judged (no solution = +inf)
+        grids.append((sel.pivot_table(index=H, columns=L,
+                                      values="spec_value" if study.spec else stat),
+                      sel.pivot_table(index=H, columns=L, values="invalid_fraction")))
+    finite = [g.to_numpy()[np.isfinite(g.to_numpy())] for g, _ in grids]
+    vmin = min(float(f.min(initial=np.inf)) for f in finite)
+    vmax = max(float(f.max(initial=-np.inf)) for f in finite)
     norm = LogNorm(vmin, vmax) if vmin > 0 and vmax / vmin > 10 else Normalize(0, vmax)
-    for ax, combo, grid in zip(axes, combos, grids, strict=True):
+    for ax, combo, (grid, invalid) in zip(axes, combos, grids, strict=True):
         z = grid.to_numpy()
         mesh = ax.pcolormesh(np.arange(z.shape[1] + 1), np.arange(z.shape[0] + 1), z,
                              cmap="viridis", norm=norm)
         for (i, j), val in np.ndenumerate(z):
-            ax.text(j + 0.5, i + 0.5, f"{val:.0f}" if val >= 100 else f"{val:.3g}",
-                    ha="center", va="center", fontsize=7,
-                    color="w" if norm(val) < 0.6 else "k")
-        if study.spec is not None and np.nanmin(z) < study.spec.limit < np.nanmax(z):
-            cs = ax.contour(np.arange(z.shape[1]) + 0.5, np.arange(z.shape[0]) + 0.5, z,
-                            levels=[study.spec.limit], colors="r", linewidths=2)
-            ax.clabel(cs, fmt=lambda _: _spec_text(study), fontsize=7)
+            text = "∞" if val == np.inf else f"{val:.0f}" if val >= 100 else f"{val:.3g}"
+            bad = invalid.to_numpy()[i, j]
+            if bad >= 0.005:
+                text += f"\n{bad:.0%} no sol."
+            ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7,
+                    color="w" if np.isfinite(val) and norm(val) < 0.6 else "k")
+        if study.spec is not None:
+            limit = study.spec.limit
+            if np.nanmin(z) < limit < np.nanmax(z):
+                cs = ax.contour(np.arange(z.shape[1]) + 0.5, np.arange(z.shape[0]) + 0.5, z,
+                                levels=[limit], colors="r", linewidths=2)
+                ax.clabel(cs, fmt=lambda _: _spec_text(study), fontsize=7)
+            elif not (z <= limit).any():
+                ax.text(0.5, 1.01, "no grid point meets the spec", transform=ax.transAxes,
+                        ha="center", va="bottom", fontsize=8, color="r")
+            elif (z <= limit).all():
+                ax.text(0.5, 1.01, "every grid point meets the spec", transform=ax.transAxes,
+                        ha="center", va="bottom", fontsize=8, color="g")
         ax.set_xticks(np.arange(z.shape[1]) + 0.5, [_fmt(v) for v in grid.columns], fontsize=7)
         ax.set_yticks(np.arange(z.shape[0]) + 0.5, [_fmt(v) for v in grid.index], fontsize=7)
         ax.set_xlabel(key_label(L))
         ax.set_ylabel(key_label(H))
         ax.set_title(", ".join(short_label(k, v) for k, v in zip(others, combo, strict=True)),
-                     fontsize=9)
-    fig.colorbar(mesh, ax=list(axes), label=f"{stat} of {m.label}, {variant} [{m.unit}]")
+                     fontsize=9, pad=14)
+    over = "\nover all trials (no solution = ∞)" if study.spec else ""
+    fig.colorbar(mesh, ax=list(axes), label=f"{stat} of {m.label}, {variant} [{m.unit}]{over}")
     fig.suptitle(f"{study.header.name}: {stat} over L × H"
                  + (f" (red: {_spec_text(study)})" if study.spec else ""), fontsize=10)
     return fig
@@ -355,3 +401,67 @@ def all_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str, F
     if lh is not None:
         figures.append(("map_L_H.png", lh))
     return figures
+
+
+def metric_axes(result: StudyResult, summary: pd.DataFrame, metric: str | None = None,
+                variant: str | None = None, ax: Axes | None = None) -> Axes:
+    """One metric at every grid point on one axes: p50 with a band to p95, p99 dotted, the
+    confidence interval of p95 as bars and the spec limit.
+
+    The x axis is the swept key if there is exactly one numeric sweep key, else the grid point
+    number (ticks name the point). ``metric`` defaults to the plotted one (the spec's, else the
+    true rotation angle), ``variant`` to the spec's (else the last), ``ax`` to a new figure.
+    """
+    study = result.study
+    metric = metric or plot_metric(study)
+    names = [mm.name for _, mm in study.metrics]
+    if metric not in names:
+        raise ValueError(f"metric {metric!r} is not in this study (it has "
+                         f"{', '.join(dict.fromkeys(names))})")
+    variants = [v for v, mm in study.metrics if mm.name == metric]
+    if variant is None:
+        variant = study.spec.variant if study.spec and study.spec.variant else variants[-1]
+    if variant not in variants:
+        raise ValueError(f"variant {variant!r} has no metric {metric!r} (variants: "
+                         f"{', '.join(variants)})")
+    m = study.metric(metric)
+    data = summary[(summary["metric"] == metric) & (summary["variant"] == variant)]
+    data = data.sort_values("point")
+    if ax is None:
+        ax = Figure(figsize=(6.5, 4.0), layout="constrained").subplots()
+    keys = study.sweep_keys
+    if len(keys) == 1 and not _is_categorical(data, keys[0]):
+        data = data.sort_values(keys[0])
+        x = data[keys[0]].to_numpy(float)
+        ax.set_xlabel(key_label(keys[0]))
+    else:
+        x = np.arange(len(data), dtype=float)
+        if len(data) <= 6:
+            ax.set_xticks(x, [textwrap.fill(", ".join(short_label(k, study.points[p].values[k])
+                                                      for k in keys), 24) or f"point {p}"
+                              for p in data["point"]], fontsize=6)
+            ax.set_xlabel("grid point")
+        else:
+            ax.set_xticks(x, [str(p) for p in data["point"]], fontsize=7)
+            ax.set_xlabel("grid point (the summary's point column)")
+    ax.plot(x, data["p50"], "-o", ms=3, color="C0", label="p50")
+    ax.fill_between(x, data["p50"], data["p95"], color="C0", alpha=0.2, lw=0, label="to p95")
+    ax.plot(x, data["p99"], ":", color="C0", lw=1, label="p99")
+    ci = data["p95_lo"].notna().to_numpy()  # none over enumerated corners
+    if ci.any():
+        sel = data[ci]
+        ax.errorbar(x[ci], sel["p95"], yerr=[sel["p95"] - sel["p95_lo"],
+                                            (sel["p95_hi"] - sel["p95"]).fillna(0.0)],
+                    fmt="none", ecolor="C0", capsize=2, lw=0.8,
+                    label=f"{study.header.confidence:.0%} CI of p95")
+    if study.spec and study.spec.metric == metric and study.spec.variant in (None, variant):
+        if study.spec.statistic not in ("p50", "p95", "p99"):
+            ax.plot(x, data[study.spec.statistic], "x", color="C3", label=study.spec.statistic)
+        ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
+    ax.set_ylabel(f"{m.label} [{m.unit}]")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(f"{study.header.name}: {m.label}"
+                 + ("" if variant == "default" else f" ({variant})"), fontsize=9)
+    return ax

@@ -74,8 +74,9 @@ def provenance(kind: str, **record: Any) -> dict[str, Any]:
 
 def study_provenance(result: Any, run_options: dict[str, Any]) -> dict[str, Any]:
     """Provenance of a study run: the study, its hash, seed and resolved form, how it was run
-    (``run_options`` do not change results) and which points came from checkpoints."""
+    (``run_options`` do not change results), which path computed the trials (``kernel``) and
+    which points came from checkpoints."""
     study = result.study
     return provenance("run", study=study.header.name, study_hash=study.hash(),
-                      seed=study.header.seed, run_options=run_options,
+                      seed=study.header.seed, run_options=run_options, kernel=result.kernel,
                       resumed=result.resumed or None, resolved_study=study.resolved())

@@ -34,7 +34,9 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
     larger than the limit (``spec_value``, ``spec_lo``, ``spec_hi`` of the summary): 'meets'
     needs the whole confidence interval at or below the limit, 'fails' the whole interval
     above; otherwise the trials do not decide ('undecided'). For max, mean and std no interval
-    is computed and the value alone decides.
+    is computed and the value alone decides; a sampled max comes with the fraction of all
+    possible trials it bounds at the study's confidence (Wilks). Where the trials enumerate the
+    worst-case corners, the statistic is exact and has no interval.
     """
     study = result.study
     spec = study.spec
@@ -46,8 +48,16 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
     out[f"{stat} (valid trials)"] = sel[stat]
     out[f"{stat} (all trials)"] = sel["spec_value"]
     if stat.startswith("p"):
-        out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" for a, b in
-                             zip(sel["spec_lo"], sel["spec_hi"], strict=True)]
+        out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" if sampling == "random" else "exact"
+                             for a, b, sampling in zip(sel["spec_lo"], sel["spec_hi"],
+                                                       sel["sampling"], strict=True)]
+    if stat == "max" and (sel["sampling"] == "random").any():
+        out[f"bounds ({study.header.confidence:.0%} conf.)"] = [
+            f"≥ {c:.3%} of trials" if sampling == "random" else "all cases"
+            for c, sampling in zip(sel["spec_coverage"], sel["sampling"], strict=True)]
+    if (sel["sampling"] == "enumerated").any():
+        out["trials are"] = sel["sampling"].map({"random": "sampled",
+                                                 "enumerated": "all corners"})
     out["verdict"] = sel["verdict"]
     return out.rename(columns={k: key_label(k) for k in study.sweep_keys})
 
@@ -66,6 +76,8 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
         f"{', '.join(str(t) for t in trials)}",
         f"- seed {h.seed}; common random numbers: {'yes' if h.common_random_numbers else 'no'}; "
         f"block size {study.block_size}; percentile intervals at {h.confidence:.0%} confidence",
+        "- trials computed by the " + ("compiled fast kernel" if result.kernel == "fast" else
+                                       "literal reference implementation"),
         f"- study hash `{provenance['study_hash'][:16]}`; montecarlo "
         f"{provenance['package_version']}; commit `{provenance['git_commit']}`",
         "", "## Assumptions", "",
@@ -90,7 +102,8 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
                   "without a solution counts as exceeding the limit.", "",
                   markdown_table(verdicts), ""]
 
-    cols = ["point", *study.sweep_keys, "variant", "count", "invalid", "mean", "std", "p50",
+    cols = ["point", *study.sweep_keys, "variant", "count", "invalid", "sampling", "mean", "std",
+            "p50",
             "p95", "p95_lo", "p95_hi", "p99", "max"]
     if (summary["invalid_fraction"] > 0).any():
         cols.insert(cols.index("invalid") + 1, "invalid_fraction")
@@ -98,7 +111,9 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
         columns={k: key_label(k) for k in study.sweep_keys})
     lines += ["", f"## Summary: {m.label} [{m.unit}]", "",
               "All metrics are in `summary.csv` / `summary.parquet`. Moments, percentiles and "
-              "max are over the trials with a solution (`percentiles_over = valid`).", "",
+              "max are over the trials with a solution (`percentiles_over = valid`). Where the "
+              "trials enumerate the worst-case corners (`sampling = enumerated`) the statistics "
+              "are exact and have no confidence interval.", "",
               markdown_table(table), ""]
 
     inv = summary[summary["invalid"] > 0]

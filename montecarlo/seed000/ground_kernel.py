@@ -24,6 +24,7 @@ import numba as nb
 import numpy as np
 
 from montecarlo.geometry.invalid import Invalid
+from montecarlo.jit import cached
 
 _BEHIND = int(Invalid.BEHIND_SENSOR)
 _OUTSIDE = int(Invalid.OUTSIDE_FOV)
@@ -284,3 +285,9 @@ def metrics_in_place(fields: np.ndarray) -> None:
     np.arccos(fields[12:14], out=fields[12:14])
     np.arcsin(fields[14:16], out=fields[14:16])
     np.multiply(fields[0:4:3], 0.5, out=fields[16:18])
+
+
+def is_cached(varying: bool) -> bool:
+    """True if numba's cache holds the kernel for one mounting (or, ``varying``, one per trial);
+    else its first use compiles (several seconds)."""
+    return cached(_solve_varying if varying else _solve_fixed)

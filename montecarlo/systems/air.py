@@ -32,6 +32,7 @@ AIR = ParamSystem(
         Metric("level_error", "slave level error after alignment", "arcmin",
                1.0 / SUFFIXES["arcmin"]),
     ),
+    seconds_per_trial=5e-6,
     default_block_size=1 << 14,
     limits={**dict.fromkeys(("heading_sigma", "level_sigma", "gyro_drift", "accel_bias",
                              "install_bound", "master_heading_sigma", "master_level_sigma"),

@@ -133,6 +133,7 @@ GROUND = ParamSystem(
         Metric("rms", "residual RMS", "px", 1.0),
         *(Metric(m, m.replace("_", " "), "1", 1.0) for m in TRIAL_METRICS[4:]),
     ),
+    seconds_per_trial=0.05,
     default_block_size=32,
 )
 """Study system ``discrepancy_ground``: residual statistics and DIA rates."""
@@ -223,6 +224,7 @@ COLLIMATION = ParamSystem(
         Metric("rms", "residual RMS", "arcsec", 1.0 / ARCSEC),
         *(Metric(m, m.replace("_", " "), "1", 1.0) for m in TRIAL_METRICS[4:]),
     ),
+    seconds_per_trial=0.05,
     default_block_size=32,
 )
 """Study system ``discrepancy_collimation``: residual statistics and DIA rates."""
@@ -232,7 +234,7 @@ COLLIMATION = ParamSystem(
 
 
 def monte_carlo_gap(d: Diagnosis, view: SystemView, trials: int = 200, seed: int = 0,
-                    n_jobs: int = 1) -> dict[str, FloatArray]:
+                    n_jobs: int | None = 1) -> dict[str, FloatArray]:
     """Simulated chi2_red of the model before and after, through the study runner.
 
     Returns ``{"before": (trials,), "after": (trials,)}``: each data set is simulated on the

@@ -51,6 +51,7 @@ class ParamSystem:
         :data:`montecarlo.units.SUFFIXES`); omitted parameters are unitless numbers or text.
     metrics : the metrics to aggregate, with display units.
     default_block_size : trials per block (small for expensive trials).
+    seconds_per_trial : rough cost of one trial on one core [s], for planning.
     limits : parameter -> (lowest, highest) allowed, in the study-file unit (None: open), so
         that a value no trial could use is refused when the study is loaded.
     choices : parameter -> the texts a text parameter may take.
@@ -62,6 +63,7 @@ class ParamSystem:
     units: Mapping[str, str]
     metrics_: tuple[Metric, ...]
     default_block_size: int = 256
+    seconds_per_trial: float = 1e-3
     limits: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
@@ -96,6 +98,9 @@ class ParamSystem:
 
     def metrics(self, prepared: PreparedParams) -> list[tuple[str, Metric]]:
         return [(VARIANT, m) for m in self.metrics_]
+
+    def is_sampled(self, prepared: PreparedParams) -> bool:
+        return True
 
     def trials_per_point(self, prepared: PreparedParams, requested: int) -> int:
         return requested

@@ -72,7 +72,8 @@ def scenarios(system: str) -> list[dict[str, Any]]:
     return out
 
 
-def run(system: str, trials: int = 500, seed: int = 2024, n_jobs: int = 2) -> pd.DataFrame:
+def run(system: str, trials: int = 500, seed: int = 2024,
+        n_jobs: int | None = None) -> pd.DataFrame:
     """Run the acceptance study of ``system`` and summarise each scenario (one row each)."""
     study_system, defaults = ((sd.GROUND, sd.GROUND_DEFAULTS) if system == "ground"
                               else (sd.COLLIMATION, sd.COLLIMATION_DEFAULTS))

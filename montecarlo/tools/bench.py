@@ -97,7 +97,7 @@ def _block_rate(n: int, repeats: int, fast: bool) -> float:
     return _median_rate(run, n, repeats)
 
 
-def runner_rate(n: int, repeats: int, n_jobs: int = 2) -> float:
+def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> float:
     """(d) trials per second through run_study on ``n_jobs`` loky workers."""
     study = _study(n)
     options = RunOptions(n_jobs=n_jobs, progress=False)  # no checkpoints: each run afresh

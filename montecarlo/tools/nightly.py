@@ -118,7 +118,7 @@ def append_history(path: Path, checks: list[Check], stamp: str, commit: str | No
 
 
 def run_nightly(studies_dir: Path = Path("studies"), out_dir: Path = Path("results/nightly"),
-                n_jobs: int = 2, progress: bool = True) -> tuple[bool, list[Check]]:
+                n_jobs: int | None = None, progress: bool = True) -> tuple[bool, list[Check]]:
     """Run the nightly studies and checks; returns (all passed, checks).
 
     ``out_dir`` is replaced as a whole (it must be absent, empty or an earlier nightly result);

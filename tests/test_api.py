@@ -1,0 +1,95 @@
+"""The Python interface: ``montecarlo.run`` returns a Result and writes nothing unless asked."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import montecarlo
+from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.errors import InputError
+from montecarlo.systems import study_from_dict
+
+ROOT = Path(__file__).parent.parent
+TABLE1 = ROOT / "studies" / "table1.toml"
+
+SMALL = {
+    "study": {"name": "api-small", "system": "ground", "trials": 4000, "seed": 5},
+    "sensor": {"fov_deg": [90.0, 90.0], "pixels": [512, 512]},
+    "mounting": {"psi_deg": 30.0, "theta_deg": 20.0, "gamma_deg": 10.0},
+    "geometry": {"L_m": 50.0, "H_m": 1.0},
+    "errors": {"dx_m": {"dist": "uniform", "bound": 0.1},
+               "dy_m": {"dist": "uniform", "bound": 0.1},
+               "dh1_m": {"dist": "uniform", "bound": 0.1},
+               "dh_m": {"dist": "uniform", "bound": 0.005},
+               "pixel_px": {"dist": "normal", "sigma": 0.5}, "pixel_relation": "common"},
+    "solver": {"variants": ["normalised"]},
+    "spec": {"metric": "rotation_angle", "statistic": "p95", "limit": 4.6},
+    "sweep": [{"geometry.L_m": [50.0, 100.0]}],
+}
+
+
+def test_run_from_a_dict_equals_the_runner_and_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = montecarlo.run(SMALL)
+    assert list(tmp_path.iterdir()) == []  # no checkpoints, no results
+    direct = run_study(study_from_dict(SMALL), RunOptions(progress=False)).to_frame()
+    pd.testing.assert_frame_equal(result.summary, direct, check_exact=True)
+    assert set(result.summary["unit"]) == {"mrad"}
+    assert list(result.verdicts["verdict"]) == ["fails", "meets"]  # p95 4.95, 4.29 mrad
+
+
+def test_trials_and_seed_override_the_study():
+    a = montecarlo.run(SMALL, trials=1000, seed=1)
+    b = montecarlo.run(SMALL, trials=1000, seed=2)
+    assert (a.summary["trials"] == 1000).all()
+    assert not np.array_equal(a.summary["mean"], b.summary["mean"])
+    study = montecarlo.load_study(TABLE1)
+    again = montecarlo.run(study, trials=1000)
+    assert set(again.summary["trials"]) == {64, 1000}  # corners stay enumerated
+
+
+def test_plot_report_and_figures(tmp_path):
+    result = montecarlo.run(SMALL, trials=1000)
+    ax = result.plot()
+    assert ax.get_ylabel() == "true rotation angle φ of D [mrad]"
+    assert "spec: p95 ≤ 4.6 mrad" in ax.get_legend_handles_labels()[1]
+    with pytest.raises(ValueError, match="metric 'nope' is not in this study"):
+        result.plot("nope")
+    assert "histograms.png" in result.figures()
+    out = result.report(tmp_path / "report")
+    assert (out / "summary.csv").is_file() and (out / "report.md").is_file()
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["kind"] == "run" and prov["study"] == "api-small"
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "summary.parquet"), result.summary)
+
+
+def test_a_mistake_is_an_input_error_naming_the_key():
+    bad = {**SMALL, "sensor": {"fov_deg": [90.0, 90.0], "pixels": [0, 512]}}
+    with pytest.raises(InputError, match="sensor.pixels"):
+        montecarlo.run(bad)
+
+
+def test_import_montecarlo_is_quick_and_lazy():
+    code = ("import sys, montecarlo; print(sorted(m for m in ('pandas', 'numba', 'matplotlib') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_worst_case_corners_are_exact_and_a_sampled_max_states_its_coverage():
+    result = montecarlo.run(TABLE1, trials=2000)
+    s = result.summary
+    corners = s[s["errors.evaluation"] == "worst_case"]
+    sampled = s[s["errors.evaluation"] == "sampled"]
+    assert set(corners["sampling"]) == {"enumerated"} and set(sampled["sampling"]) == {"random"}
+    assert corners["p95_lo"].isna().all() and sampled["p95_lo"].notna().all()
+    spec = sampled[sampled["verdict"].notna()]
+    # Wilks: the max of n trials bounds a fraction (1 - confidence) ** (1 / n) of the population
+    np.testing.assert_allclose(spec["spec_coverage"], 0.05 ** (1 / 2000))
+    assert corners.loc[corners["verdict"].notna(), "spec_coverage"].isna().all()
