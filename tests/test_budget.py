@@ -11,6 +11,7 @@ from scipy import stats
 from montecarlo.design import budget as bg
 from montecarlo.design import budget_report
 from montecarlo.design import sizing_problem as sp
+from montecarlo.engine.distributions import Distribution
 from montecarlo.errors import InputError
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
@@ -209,3 +210,29 @@ def test_cli_budget_from_sizing_answers(tmp_path, capsys):
     answers.write_text("pixel_relation,L_m\ncommon,abc\n")
     assert main([*common, "--relations", "common"]) == 2
     assert f"{answers}: row 2: column L_m: not a number: 'abc'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("dist", [Distribution("triangular", 0.2, 0.5),
+                                  Distribution("truncnormal", -0.1, 0.3, 1.2),
+                                  Distribution("normal", 0.1, 0.2),
+                                  Distribution("uniform", 0.0, 0.4)], ids=lambda d: d.kind)
+def test_salib_draws_the_same_shapes_as_the_runner(dist):
+    """SALib's quantile transform of u equals the runner's map of the same unit variate."""
+    from SALib.util import scale_samples
+    from scipy.special import ndtri
+
+    name, bounds = bg._salib_dist("x", dist)
+    u = np.linspace(0.001, 0.999, 99)[:, None]
+    salib = scale_samples(u.copy(), {"num_vars": 1, "names": ["x"], "bounds": [bounds],
+                                     "dists": [name]})[:, 0]
+    unit = u[:, 0].copy() if dist.kind in ("uniform", "triangular") else ndtri(u[:, 0])
+    a, b = (2.0 * dist.scale, dist.location - dist.scale) if dist.kind == "uniform" \
+        else (dist.scale, dist.location)
+    ours = a * (dist.standard(unit) if dist.kind not in ("uniform", "normal") else unit) + b
+    np.testing.assert_allclose(salib, ours, rtol=1e-9, atol=1e-12)
+
+
+def test_a_budget_refuses_shapes_it_cannot_allot():
+    for kind in ("arcsine", "lognormal", "corners"):
+        with pytest.raises(InputError, match=f"got {kind}"):
+            bg._salib_dist("errors.dx_m", Distribution(kind, 0.0, 1.0, 0.5))

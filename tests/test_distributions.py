@@ -77,3 +77,59 @@ def test_worst_case_of_a_normal_source_is_refused():
     with pytest.raises(ValueError, match="no worst case"):
         Distribution("normal", 0.0, 1.0).worst_case()
     assert Distribution("uniform", 1.0, 2.0).worst_case() == Distribution("corners", 1.0, 2.0)
+
+
+SHAPES = [
+    (Distribution("triangular", 0.3, 2.0), stats.triang(c=0.5, loc=-1.7, scale=4.0)),
+    (Distribution("arcsine", -1.0, 0.5), stats.arcsine(loc=-1.5, scale=1.0)),
+    (Distribution("truncnormal", 2.0, 0.5, 1.5), stats.truncnorm(-1.5, 1.5, loc=2.0, scale=0.5)),
+    (Distribution("truncnormal", 0.0, 1.0, 0.2), stats.truncnorm(-0.2, 0.2)),
+    (Distribution("lognormal", 0.0, 3.0, 0.4), stats.lognorm(s=0.4, scale=3.0)),
+]
+
+
+@pytest.mark.parametrize(("dist", "reference"), SHAPES, ids=lambda v: getattr(v, "kind", ""))
+def test_shapes_follow_scipy_distributions(dist, reference):
+    x = Streams(3, 0, 0).fill(dist, "dx_m", np.empty(N))
+    assert stats.kstest(x, reference.cdf).pvalue > 1e-3
+    np.testing.assert_allclose([x.mean(), x.std()], [reference.mean(), reference.std()],
+                               rtol=0.02, atol=0.01 * reference.std())
+    if dist.half_width is not None:
+        assert np.abs(x - dist.location).max() <= dist.half_width
+        assert dist.worst_case() == Distribution("corners", dist.location, dist.half_width)
+
+
+def test_shapes_share_unit_draws_with_uniform_or_normal():
+    """Common random numbers: a shape's draws are a monotone map of the same unit draws."""
+    n = 5000
+    streams = Streams(9, 0, 2)
+    for base, kinds in ((UNIFORM, ("triangular", "arcsine")),
+                        (Distribution("normal", 0.0, 1.0), ("truncnormal", "lognormal"))):
+        ref = Streams(9, 4, 2).fill(base, "dh_m", np.empty(n))
+        for kind in kinds:
+            x = streams.fill(Distribution(kind, 0.0, 1.0, 2.0), "dh_m", np.empty(n))
+            assert stats.spearmanr(ref, x).statistic == pytest.approx(1.0)
+            streams = Streams(9, 0, 2)
+
+
+def test_a_wide_truncnormal_is_the_normal():
+    s = Streams(5, 0, 0)
+    wide = s.fill(Distribution("truncnormal", 1.0, 2.0, 12.0), "x", np.empty(10000))
+    normal = Streams(5, 0, 0).fill(Distribution("normal", 1.0, 2.0), "x", np.empty(10000))
+    np.testing.assert_allclose(wide, normal, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("kind", ["triangular", "arcsine", "truncnormal", "lognormal"])
+def test_a_block_drawn_in_pieces_equals_the_block_at_once(kind):
+    dist = Distribution(kind, 0.5, 2.0, 1.0)
+    whole = Streams(1, 0, 0).fill(dist, "dy_m", np.empty(1000))
+    pieces = Streams(1, 0, 0)
+    parts = [pieces.fill(dist, "dy_m", np.empty(m)) for m in (1, 299, 700)]
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+def test_unbounded_shapes_have_no_worst_case_and_no_correlated_pair():
+    with pytest.raises(ValueError, match="lognormal source has no worst case"):
+        Distribution("lognormal", 0.0, 1.0, 0.3).worst_case()
+    with pytest.raises(ValueError, match="needs a uniform or normal source"):
+        correlated_pair(Distribution("triangular", 0.0, 1.0), 0.5, Streams(1, 0, 0), "p", 10)

@@ -162,3 +162,27 @@ def test_block_drawn_in_pieces_equals_block_drawn_at_once(tmp_path, relation):
                                                                (4096, 5000)]]
     np.testing.assert_array_equal(np.concatenate([e for _, e in pieces], axis=1), whole)
     np.testing.assert_array_equal(np.concatenate([t[0] for t, _ in pieces]), true[0])
+
+
+def test_every_distribution_shape_gives_the_same_statistics_on_both_paths(monkeypatch):
+    from montecarlo.systems import study_from_dict
+
+    raw = {"study": {"system": "ground", "trials": 20000, "seed": 11},
+           "sensor": {"fov_deg": [60.0, 60.0], "pixels": [512, 512]},
+           "mounting": {"psi_deg": {"dist": "arcsine", "bound": 2.0}},
+           "geometry": {"L_m": 50.0, "H_m": 1.0},
+           "errors": {"dx_m": {"dist": "triangular", "bound": 0.1},
+                      "dy_m": {"dist": "truncnormal", "sigma": 0.05, "bound": 0.08},
+                      "dh1_m": {"dist": "arcsine", "bound": 0.1},
+                      "dh_m": {"dist": "lognormal", "median": 0.002, "sigma_ln": 0.5},
+                      "pixel_px": {"dist": "triangular", "bound": 0.6},
+                      "pixel_relation": "independent"}}
+    study = study_from_dict(raw)
+    monkeypatch.setattr(runner, "REFERENCE_BELOW", 0.0)
+    fast = run_study(study, RunOptions(n_jobs=1, progress=False))
+    ref = run_study(study, RunOptions(n_jobs=1, progress=False, reference=True))
+    assert (fast.kernel, ref.kernel) == ("fast", "reference")
+    a, b = fast.to_frame(), ref.to_frame()
+    pd.testing.assert_series_equal(a["count"], b["count"])
+    for col in agg.VALUE_COLUMNS:
+        np.testing.assert_allclose(a[col], b[col], rtol=1e-9, atol=1e-12, err_msg=col)

@@ -126,8 +126,14 @@ def _salib_dist(name: str, d: Distribution) -> tuple[str, list[float]]:
         return "unif", [d.location - d.scale, d.location + d.scale]
     if d.kind == "normal":
         return "norm", [d.location, d.scale]
-    raise InputError(f"{name}: a budget needs uniform or normal error sources (got {d.kind}); "
-                     f"corners are a worst case and have no variance")
+    if d.kind == "triangular":
+        return "triang", [d.location - d.scale, d.location + d.scale, 0.5]
+    if d.kind == "truncnormal":
+        half = d.scale * d.shape
+        return "truncnorm", [d.location - half, d.location + half, d.location, d.scale]
+    raise InputError(f"{name}: a budget needs uniform, triangular, normal or truncnormal "
+                     f"error sources, whose scale it can allot (got {d.kind}); corners are a "
+                     f"worst case and have no variance")
 
 
 @dataclass(frozen=True)
@@ -146,7 +152,7 @@ class GroundBudgetModel:
     columns: tuple[str, ...]
     groups: tuple[str, ...]
     dists: tuple[str, ...]
-    bounds: tuple[tuple[float, float], ...]
+    bounds: tuple[tuple[float, ...], ...]
 
     @classmethod
     def from_prepared(cls, prepared: PreparedGround, relation: str, metric: str, variant: str
@@ -230,6 +236,12 @@ def _describe_source(raw: Mapping[str, Any], unit: str) -> str:
             return f"normal σ {raw['sigma']:.3g} {unit}"
         case "corners":
             return f"corners ±{raw['bound']:.3g} {unit}"
+        case "triangular" | "arcsine":
+            return f"{raw['dist']} ±{raw['bound']:.3g} {unit}"
+        case "truncnormal":
+            return f"normal σ {raw['sigma']:.3g} {unit} cut at ±{raw['bound']:.3g} {unit}"
+        case "lognormal":
+            return f"lognormal, median {raw['median']:.3g} {unit}, σ_ln {raw['sigma_ln']:.3g}"
     return f"fixed {raw.get('value', 0.0):.3g} {unit}"
 
 

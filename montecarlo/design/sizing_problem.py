@@ -259,17 +259,21 @@ def _get(raw: Mapping[str, Any], key: str) -> Any:
 def _scaled_sources(base: Mapping[str, Any], knob: str, value: float) -> dict[str, Any]:
     """Study overrides that give each distributed source of ``knob`` the scale ``value``.
 
-    Uniform and corner sources get ``bound = value``, normal ones ``sigma = value``; fixed
-    sources (a plain number) stay as they are. Raises :class:`InputError` if the knob has no
-    distributed source in the base design.
+    Uniform, triangular, arcsine and corner sources get ``bound = value``, normal ones
+    ``sigma = value``, truncated normal ones ``sigma = value`` with their bound scaled alike;
+    fixed sources (a plain number) stay as they are. Raises :class:`InputError` if the knob has
+    no such source in the base design (a lognormal source has no additive scale to size).
     """
     out = {}
     for key in KNOBS[knob].keys:
         src = _get(base, key)
-        if isinstance(src, Mapping) and src.get("dist") in ("uniform", "corners"):
+        dist = src.get("dist") if isinstance(src, Mapping) else None
+        if dist in ("uniform", "triangular", "arcsine", "corners"):
             out[key] = {**src, "bound": value}
-        elif isinstance(src, Mapping) and src.get("dist") == "normal":
+        elif dist == "normal":
             out[key] = {**src, "sigma": value}
+        elif dist == "truncnormal" and src.get("sigma", 0.0) > 0.0:
+            out[key] = {**src, "sigma": value, "bound": src["bound"] * value / src["sigma"]}
     if not out:
         raise InputError(f"knob {knob}: none of {', '.join(KNOBS[knob].keys)} has a "
                          f"distribution in the base design, so there is no error scale to size")

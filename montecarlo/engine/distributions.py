@@ -1,9 +1,12 @@
 """Error-source distributions and the random streams that feed them.
 
-A source is fixed, uniform on ``center +- bound``, normal ``N(mean, sigma^2)``, or evaluated at
-the two corners ``center +- bound`` (worst case). Draws are unit variates first (``U[0, 1)``,
-``N(0, 1)`` or corner signs) mapped affinely to the source's units, so that common random
-numbers give the same unit draws at every grid point of a study.
+A source is fixed; uniform, symmetric triangular or arcsine on ``center +- bound``; normal
+``N(mean, sigma^2)``, or the same truncated to ``mean +- bound``; lognormal with a median and
+the standard deviation of its logarithm; or evaluated at the two corners ``center +- bound``
+(worst case). Draws are unit variates first (``U[0, 1)`` for the bounded shapes, ``N(0, 1)`` for
+the normal family, or corner signs), turned by a fixed monotone map into a standard variate and
+then mapped affinely to the source's units. Common random numbers therefore give the same unit
+draws at every grid point of a study, even where a sweep changes a source's shape.
 
 Random streams are derived from one ``np.random.SeedSequence(seed)`` by spawn keys
 ``(point, block, source)`` -- or ``(block, source)`` with common random numbers -- so that a trial's
@@ -18,41 +21,92 @@ from typing import Literal
 
 import numpy as np
 
-Kind = Literal["fixed", "uniform", "normal", "corners"]
+Kind = Literal["fixed", "uniform", "triangular", "arcsine", "normal", "truncnormal",
+               "lognormal", "corners"]
+
+UNIFORM_BASED = ("uniform", "triangular", "arcsine")
+"""Kinds drawn from U[0, 1) unit variates."""
+NORMAL_BASED = ("normal", "truncnormal", "lognormal")
+"""Kinds drawn from N(0, 1) unit variates."""
 
 
 @dataclass(frozen=True)
 class Distribution:
     """A scalar error source (SI units or degrees as the field's name says).
 
-    Attributes
-    ----------
-    kind : {"fixed", "uniform", "normal", "corners"}
-    location : float
-        The fixed value, or the centre / mean.
-    scale : float
-        Half-width (uniform, corners), standard deviation (normal), 0 (fixed).
+    A draw is ``location + scale * s``, with ``s`` the standard variate of the kind:
+
+    ============  ===========================  ==========  ========================
+    kind          s                            location    scale
+    ============  ===========================  ==========  ========================
+    fixed         0                            value       0
+    uniform       uniform on [-1, 1]           centre      half-width (bound)
+    triangular    triangular on [-1, 1]        centre      half-width (bound)
+    arcsine       sin(phase), phase uniform    centre      amplitude (bound)
+    normal        N(0, 1)                      mean        sigma
+    truncnormal   N(0, 1) within +-shape       mean        sigma (shape = bound/sigma)
+    lognormal     exp(shape * N(0, 1))         0           median (shape = sigma_ln)
+    corners       -1 or +1                     centre      half-width (bound)
+    ============  ===========================  ==========  ========================
     """
 
     kind: Kind
     location: float = 0.0
     scale: float = 0.0
+    shape: float = 0.0
 
     @property
     def is_random(self) -> bool:
-        return self.kind in ("uniform", "normal") and self.scale != 0.0
+        return self.kind not in ("fixed", "corners") and self.scale != 0.0
 
     @property
     def is_corner(self) -> bool:
         return self.kind == "corners"
 
+    @property
+    def half_width(self) -> float | None:
+        """Largest deviation from ``location`` (None if unbounded)."""
+        if self.kind in ("uniform", "triangular", "arcsine", "corners"):
+            return self.scale
+        if self.kind == "truncnormal":
+            return self.scale * self.shape
+        if self.kind == "fixed" or not self.is_random:
+            return 0.0
+        return None
+
     def worst_case(self) -> Distribution:
         """The same bounds evaluated at their corners (uniform -> corners)."""
-        if self.kind == "normal" and self.scale != 0.0:
-            raise ValueError("a normal source has no worst case; give it a bound (uniform)")
+        if not self.is_random:
+            return self
+        half = self.half_width
+        if half is None:
+            raise ValueError(f"a {self.kind} source has no worst case; give it a bound "
+                             "(uniform, triangular, arcsine or truncnormal)")
+        return Distribution("corners", self.location, half)
+
+    def standard(self, unit: np.ndarray) -> np.ndarray:
+        """The kind's standard variate from its unit draws (U[0, 1) or N(0, 1)), in place."""
         if self.kind == "uniform":
-            return Distribution("corners", self.location, self.scale)
-        return self
+            unit *= 2.0
+            unit -= 1.0
+        elif self.kind == "triangular":  # inverse CDF of the triangle on [-1, 1]
+            low = unit < 0.5
+            unit[...] = np.where(low, np.sqrt(2.0 * unit) - 1.0,
+                                 1.0 - np.sqrt(2.0 * (1.0 - unit)))
+        elif self.kind == "arcsine":
+            unit[...] = np.sin(np.pi * (unit - 0.5))
+        elif self.kind == "truncnormal":  # the normal's quantile, squeezed into +-shape
+            from scipy import special
+
+            tail = special.ndtr(-self.shape)
+            width = 1.0 - 2.0 * tail
+            # each half from its own tail, so that far tails keep their precision
+            a = np.abs(unit)
+            unit[...] = np.copysign(-special.ndtri(tail + special.ndtr(-a) * width), unit)
+        elif self.kind == "lognormal":
+            unit *= self.shape
+            np.exp(unit, out=unit)
+        return unit
 
 
 
@@ -99,17 +153,22 @@ class Streams:
         return gen
 
     def fill_unit(self, dist: Distribution, source: str, out: np.ndarray) -> tuple[float, float]:
-        """Fill ``out`` with unit draws of a random source; return (a, b), its affine map.
+        """Fill ``out`` with draws of a random source before their affine map; return the map
+        (a, b): the draws in the source's units are ``a * out + b``.
 
-        The draws in the source's units are ``a * out + b``: for a uniform source U[0, 1) with
-        ``a = 2 scale``, ``b = location - scale``; for a normal source N(0, 1) with
-        ``a = scale``, ``b = location``.
+        A uniform source leaves its U[0, 1) draws (``a = 2 scale``, ``b = location - scale``);
+        a normal one its N(0, 1) draws; the other kinds their standard variate
+        (:meth:`Distribution.standard`) with ``a = scale``, ``b = location``.
         """
         gen = self.generator(source)
-        if dist.kind == "uniform":
+        if dist.kind in UNIFORM_BASED:
             gen.random(out=out)
+        else:
+            gen.standard_normal(out=out)
+        if dist.kind == "uniform":
             return 2.0 * dist.scale, dist.location - dist.scale
-        gen.standard_normal(out=out)
+        if dist.kind != "normal":
+            dist.standard(out)
         return dist.scale, dist.location
 
     def fill(self, dist: Distribution, source: str, out: np.ndarray) -> np.ndarray:
@@ -144,6 +203,9 @@ def fill_pair(dist: Distribution, relation: str | float, streams: Streams, sourc
     ``2 sin(pi rho / 6)`` gives the uniforms a Pearson correlation of exactly rho.
     """
     rho = {"common": 1.0, "independent": 0.0}.get(relation, relation)  # type: ignore[arg-type]
+    if rho not in (0.0, 1.0) and dist.kind not in ("uniform", "normal"):
+        raise ValueError(f"a correlation between targets needs a uniform or normal source, "
+                         f"not {dist.kind}")
     streams.fill(dist, source + ":a", out_a)
     if rho == 1.0:
         out_b[...] = out_a

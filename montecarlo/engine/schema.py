@@ -6,6 +6,10 @@ An error source in a study file is a number (a fixed value) or a table with ``di
     dx_m = { dist = "uniform", bound = 0.1 }      # uniform on center +- bound (center = 0)
     dx_m = { dist = "normal", sigma = 0.03 }      # normal, mean 0 unless given
     dx_m = { dist = "corners", bound = 0.1 }      # worst case: both ends +-bound
+    dx_m = { dist = "triangular", bound = 0.1 }   # symmetric triangle on center +- bound
+    dx_m = { dist = "arcsine", bound = 0.1 }      # a sinusoid of amplitude bound, random phase
+    dx_m = { dist = "truncnormal", sigma = 0.03, bound = 0.06 }  # normal cut at mean +- bound
+    dx_m = { dist = "lognormal", median = 1.0, sigma_ln = 0.1 }  # exp(ln median + sigma_ln z)
 """
 
 from __future__ import annotations
@@ -52,6 +56,31 @@ class CornersSource(Strict):
     center: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
 
 
+class TriangularSource(Strict):
+    dist: Literal["triangular"]
+    bound: float = Field(ge=0, le=LARGEST)
+    center: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
+
+
+class ArcsineSource(Strict):
+    dist: Literal["arcsine"]
+    bound: float = Field(ge=0, le=LARGEST)
+    center: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
+
+
+class TruncnormalSource(Strict):
+    dist: Literal["truncnormal"]
+    sigma: float = Field(ge=0, le=LARGEST)
+    bound: float = Field(gt=0, le=LARGEST)
+    mean: float = Field(default=0.0, ge=-LARGEST, le=LARGEST)
+
+
+class LognormalSource(Strict):
+    dist: Literal["lognormal"]
+    median: float = Field(gt=0, le=LARGEST)
+    sigma_ln: float = Field(ge=0, le=5.0)
+
+
 def _number_is_fixed(value: Any) -> Any:
     if isinstance(value, int | float) and not isinstance(value, bool):
         return {"dist": "fixed", "value": value}
@@ -59,7 +88,8 @@ def _number_is_fixed(value: Any) -> Any:
 
 
 Source = Annotated[
-    FixedSource | UniformSource | NormalSource | CornersSource,
+    FixedSource | UniformSource | NormalSource | CornersSource | TriangularSource
+    | ArcsineSource | TruncnormalSource | LognormalSource,
     Field(discriminator="dist"),
     BeforeValidator(_number_is_fixed),
 ]
@@ -77,4 +107,16 @@ def to_distribution(source: Source, scale: float = 1.0) -> Distribution:
             return Distribution("normal", m * scale, s * scale)
         case CornersSource(bound=b, center=c):
             return Distribution("corners", c * scale, b * scale)
+        case TriangularSource(bound=b, center=c):
+            return Distribution("triangular", c * scale, b * scale)
+        case ArcsineSource(bound=b, center=c):
+            return Distribution("arcsine", c * scale, b * scale)
+        case TruncnormalSource(sigma=s, bound=b, mean=m):
+            if s == 0.0:
+                return Distribution("fixed", m * scale)
+            return Distribution("truncnormal", m * scale, s * scale, b / s)
+        case LognormalSource(median=med, sigma_ln=s):
+            if s == 0.0:
+                return Distribution("fixed", med * scale)
+            return Distribution("lognormal", 0.0, med * scale, s)
     raise TypeError(source)  # pragma: no cover

@@ -96,6 +96,11 @@ class Errors(Strict):
 
     @model_validator(mode="after")
     def _worst_case_needs_bounds(self) -> Errors:
+        pixel = to_distribution(self.pixel_px)
+        if isinstance(self.pixel_relation, float) and self.pixel_relation not in (0.0, 1.0) \
+                and pixel.is_random and pixel.kind not in ("uniform", "normal"):
+            raise ValueError(f"pixel_relation {self.pixel_relation}: a correlation between "
+                             f"targets needs a uniform or normal pixel_px, not {pixel.kind}")
         if self.evaluation == "worst_case":
             for name in (*PLACEMENT_SOURCES, "pixel_px"):
                 try:
