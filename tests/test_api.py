@@ -70,7 +70,7 @@ def test_plot_report_and_figures(tmp_path):
 
 def test_a_mistake_is_an_input_error_naming_the_key():
     bad = {**SMALL, "sensor": {"fov_deg": [90.0, 90.0], "pixels": [0, 512]}}
-    with pytest.raises(InputError, match="sensor.pixels"):
+    with pytest.raises(InputError, match=r"sensor\.pixels"):
         montecarlo.run(bad)
 
 

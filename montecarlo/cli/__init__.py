@@ -13,11 +13,19 @@ import sys
 from collections.abc import Sequence
 
 from montecarlo import __version__
-from montecarlo.cli import collimation, design, diagnose, seed000, stabilization, study
+from montecarlo.cli import (
+    authoring,
+    collimation,
+    design,
+    diagnose,
+    seed000,
+    stabilization,
+    study,
+)
 from montecarlo.cli.common import EXIT_BAD_INPUT, Parser, verbosity
 from montecarlo.errors import InputError, RunInterrupted
 
-GROUPS = (study, seed000, collimation, stabilization, diagnose, design)
+GROUPS = (study, authoring, seed000, collimation, stabilization, diagnose, design)
 """Command modules, in the order their commands are listed by ``--help``."""
 
 
