@@ -1,4 +1,5 @@
-"""Commands that run studies: ``run``, ``nightly``, ``bench``."""
+"""Commands that run studies and compare results: ``run``, ``compare``, ``nightly``,
+``bench``."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from montecarlo.cli.common import (
     add_n_jobs_option,
     check_json_option,
     emit_json,
+    nonnegative,
     nonnegative_int,
     positive_int,
     quiet,
@@ -48,12 +50,40 @@ def _cmd_nightly(args: argparse.Namespace) -> int:
     from montecarlo.tools.nightly import run_nightly
 
     passed, checks = run_nightly(Path(args.studies), Path(args.out), args.n_jobs,
-                                 progress=not quiet(args))
+                                 progress=not quiet(args), accept_changes=args.accept_changes)
     for c in checks:
         print(f"{'pass' if c.passed else 'FAIL'}  {c.name}: {c.value} (expected {c.expected})")
     print(f"nightly: {sum(c.passed for c in checks)}/{len(checks)} checks pass; "
           f"report {args.out}/report.md")
     return 0 if passed else 1
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from montecarlo.output.compare import compare_runs, load_run, verdict_counts
+
+    check_json_option(args)
+    a, b = load_run(args.run_a), load_run(args.run_b)
+    spec = a.provenance.get("resolved_study", {}).get("spec") or {}
+    statistic = args.statistic or spec.get("statistic", "p95")
+    table = compare_runs(a, b, statistic, args.rtol, args.allow_different)
+    counts = verdict_counts(table)
+    mode = table["comparison"].iloc[0] if table["comparison"].nunique() == 1 else "mixed"
+    if not emit_json(args, {"a": str(a.path), "b": str(b.path), "study": a.name,
+                            "statistic": statistic, "comparison": mode, "counts": counts,
+                            "rows": table.to_dict("records")}):
+        how = ("paired: same seed and trials, so every difference is the code's"
+               if mode == "paired" else "independent samples: differences judged on their "
+               "95 % intervals" if mode == "independent" else "paired and independent rows")
+        print(f"{a.name}: {b.path} against {a.path}, {statistic} ({how})")
+        shown = table if args.all else table[table["verdict"] != "same"]
+        if len(shown):
+            view = shown.drop(columns=["statistic", "comparison"]).copy()
+            for col in ("a", "b", "diff", "diff_lo", "diff_hi"):
+                view[col] = view[col].map(lambda v: f"{v:.6g}")
+            view["rel_diff"] = view["rel_diff"].map(lambda v: f"{v:+.3%}")
+            print(view.to_string(index=False))
+        print(", ".join(f"{n} {v}" for v, n in counts.items() if n) + f" of {len(table)} rows")
+    return 1 if counts["worse"] else 0
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -82,9 +112,26 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="use the literal reference implementation instead of the fast kernel")
     p.set_defaults(func=_cmd_run)
 
+    p = sub.add_parser("compare", help="compare two results of a study: difference, interval "
+                       "and verdict per grid point (exit 1 if anything got worse)")
+    p.add_argument("run_a", help="result directory of `montecarlo run` (the reference)")
+    p.add_argument("run_b", help="result directory to compare with it")
+    p.add_argument("--statistic", choices=("mean", "std", "p50", "p90", "p95", "p99", "max"),
+                   help="statistic to compare (default: the spec's, else p95)")
+    p.add_argument("--rtol", type=nonnegative, default=1e-9,
+                   help="relative tolerance of paired runs (same seed and trials; 1e-9)")
+    p.add_argument("--allow-different", action="store_true",
+                   help="compare results of different studies on their common grid points")
+    p.add_argument("--all", action="store_true", help="show every row, not only the changes")
+    add_json_option(p, "the comparison")
+    p.set_defaults(func=_cmd_compare)
+
     p = sub.add_parser("nightly", help="rerun Table 1 and the trend checks; exit 1 on regression")
     p.add_argument("--studies", default="studies", help="directory with table1.toml, trends.toml")
     p.add_argument("--out", default="results/nightly", help="output directory")
+    p.add_argument("--accept-changes", action="store_true",
+                   help="results that changed since the previous nightly do not fail the run "
+                   "(after an intended change of the model)")
     add_n_jobs_option(p)
     p.set_defaults(func=_cmd_nightly)
 
