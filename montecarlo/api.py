@@ -69,15 +69,15 @@ class Result:
 
         return metric_axes(self._result, self.summary, metric, variant, ax)
 
-    def report(self, directory: str | Path) -> Path:
+    def report(self, directory: str | Path, fmt: str = "png") -> Path:
         """Write what ``montecarlo run`` writes into ``directory`` (absent, empty or an earlier
-        result of this study), all or nothing."""
+        result of this study), all or nothing; plots as ``fmt`` (png, svg or pdf)."""
         from montecarlo.io.files import OutputDir
         from montecarlo.output.outputs import write_outputs
 
         directory = Path(directory)
         with OutputDir(directory, "run", {"study": self.study.header.name}) as staging:
-            write_outputs(self._result, staging, self.options)
+            write_outputs(self._result, staging, self.options, fmt)
         return directory
 
 
@@ -103,7 +103,7 @@ def run(study: Study | str | Path | dict[str, Any], *, trials: int | None = None
     """
     if isinstance(study, Study):
         if trials is not None or seed is not None:
-            study = study_from_dict(_raw(study), study.path, trials=trials, seed=seed)
+            study = study_from_dict(study.source, study.path, trials=trials, seed=seed)
     elif isinstance(study, dict):
         study = study_from_dict(study, trials=trials, seed=seed)
     else:
@@ -114,8 +114,3 @@ def run(study: Study | str | Path | dict[str, Any], *, trials: int | None = None
     result = run_study(study, options)
     return Result(study, result.to_frame(), result.trials, options, result)
 
-
-def _raw(study: Study) -> dict[str, Any]:
-    from montecarlo.engine.study import read_study_file
-
-    return read_study_file(study.path)

@@ -1,5 +1,5 @@
-"""Commands that run studies and compare results: ``run``, ``compare``, ``nightly``,
-``bench``."""
+"""Commands that run studies and compare results: ``run``, ``report``, ``compare``,
+``nightly``, ``bench``."""
 
 from __future__ import annotations
 
@@ -16,6 +16,8 @@ from montecarlo.cli.common import (
     positive_int,
     quiet,
 )
+
+FORMATS = ("png", "svg", "pdf")
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -34,7 +36,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         result = run_study(study, options)
         from montecarlo.output.outputs import write_outputs  # matplotlib: only for results
 
-        write_outputs(result, staging, options)
+        write_outputs(result, staging, options, args.format)
     Checkpoints(out.parent / ".checkpoints", study, args.reference).remove()
     from montecarlo.output.report import spec_verdicts
 
@@ -43,6 +45,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
           f"(report.md, summary.csv, plots/)")
     if verdicts is not None:
         print(verdicts.to_string(index=False))
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from montecarlo.output.outputs import rerender
+
+    names, prov = rerender(args.result, args.format)
+    print(f"{prov['study']}: report.md and {len(names)} plots ({args.format}) drawn again in "
+          f"{args.result}/ from its saved results")
     return 0
 
 
@@ -110,7 +121,14 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="trials per task, a multiple of the block size (results do not change)")
     p.add_argument("--reference", action="store_true",
                    help="use the literal reference implementation instead of the fast kernel")
+    p.add_argument("--format", choices=FORMATS, default="png", help="plot file format")
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("report", help="draw the plots and report.md of a result directory "
+                       "again from its saved results (no trial is run)")
+    p.add_argument("result", help="result directory of `montecarlo run`")
+    p.add_argument("--format", choices=FORMATS, default="png", help="plot file format")
+    p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("compare", help="compare two results of a study: difference, interval "
                        "and verdict per grid point (exit 1 if anything got worse)")

@@ -35,7 +35,7 @@ import json
 import math
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -99,6 +99,9 @@ class Study:
     """(mode, keys) of each sweep group, in file order."""
     points: tuple[GridPoint, ...]
     metrics: tuple[tuple[str, Metric], ...]
+    source: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
+    """The study as given (the parsed TOML with the trials and seed overrides applied): what
+    :func:`study_from_dict` needs to build it again, e.g. to re-render a saved result."""
 
     @property
     def sweep_keys(self) -> tuple[str, ...]:
@@ -267,6 +270,7 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
     path = Path(path)
     _reject_non_finite(path, raw)
     raw = copy.deepcopy(raw)
+    source = copy.deepcopy(raw)
     header_raw = raw.pop("study", None)
     if not isinstance(header_raw, dict):
         raise InputError(f"{path}: study: required table [study] is missing")
@@ -276,6 +280,7 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
         header_raw["trials"] = trials
     if seed is not None:
         header_raw["seed"] = seed
+    source["study"] = dict(header_raw)
     try:
         header = StudyHeader.model_validate(header_raw)
     except ValidationError as err:
@@ -334,5 +339,5 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
             raise InputError(f"{path}: spec.variant: not computed (got {spec.variant!r}); "
                              f"choose from {', '.join(sorted(variants))}")
     sweep_groups = tuple((mode, tuple(g)) for mode, g in groups)
-    return Study(path, header, spec, system, sweep_groups, tuple(points), metrics)
+    return Study(path, header, spec, system, sweep_groups, tuple(points), metrics, source)
 
