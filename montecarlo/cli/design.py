@@ -1,4 +1,4 @@
-"""Calibration design: ``size`` and ``budget``."""
+"""Calibration design: ``plan``, ``size`` and ``budget``."""
 
 from __future__ import annotations
 
@@ -7,13 +7,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from montecarlo.cli.common import (
+    add_json_option,
     add_n_jobs_option,
+    check_json_option,
+    emit_json,
     float_of,
     knob_assignment,
     nonnegative_int,
     positive,
     positive_int,
     probability,
+    quiet,
     write_provenance,
 )
 from montecarlo.errors import InputError
@@ -160,7 +164,62 @@ def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
     add_n_jobs_option(p)
 
 
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from montecarlo.design import planning
+    from montecarlo.engine.runner import RunOptions, run_study
+    from montecarlo.systems import load_study
+
+    check_json_option(args)
+    study = load_study(args.study)
+    h, spec = study.header, study.spec
+    stat = spec.statistic if spec else "p95"
+    p = planning.PERCENTILES.get(stat, args.coverage)
+    c = h.confidence
+    if not 0.0 < args.level_width < min(p, 1.0 - p):
+        raise InputError(f"--level-width: must be below {min(p, 1.0 - p):g} for the "
+                         f"{p:g}-quantile (got {args.level_width:g})")
+    free = planning.distribution_free_table(p, c)
+    level_n = planning.quantile_level_trials(p, args.level_width, c)
+    pilot_trials = args.trials or min(max(gp.trials for gp in study.points), 4000)
+    pilot = load_study(args.study, trials=pilot_trials)
+    result = run_study(pilot, RunOptions(n_jobs=args.n_jobs, progress=not quiet(args)))
+    table = planning.pilot_plan(result, result.to_frame(), args.width)
+    data = {"study": h.name, "statistic": stat, "quantile": p, "confidence": c,
+            "order_statistic_trials": free.to_dict("records"),
+            "quantile_level_trials": {"half_width": args.level_width, "trials": level_n},
+            "pilot_trials": pilot_trials, "points": table.to_dict("records")}
+    if emit_json(args, data):
+        return 0
+    what = f"{stat} of {spec.metric}" if spec else "p95"
+    print(f"{h.name}: trials for the {what} at {c:.0%} confidence")
+    print(f"distribution-free (any metric): {planning.wilks_text(p, c)};")
+    print("  the k-th largest of n trials bounds it with: " + ", ".join(
+        f"k={k}: n={n:,}" for k, n in free.itertuples(index=False)))
+    print(f"  the {c:.0%} interval of the {p:g}-quantile spans at most ±{args.level_width:g} "
+          f"in quantile level from {level_n:,} trials")
+    print(f"from a pilot of {pilot_trials:,} trials per grid point (estimates: the interval "
+          "half-width shrinks as 1/sqrt(n); `run --until-decided` checks):")
+    print(table.to_string(index=False))
+    return 0
+
+
 def add_commands(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plan", help="how many trials: distribution-free order-statistic counts "
+                       "and, from a pilot run, the trials to decide each spec verdict")
+    p.add_argument("study", help="study definition (TOML)")
+    p.add_argument("--trials", type=positive_int,
+                   help="pilot trials per grid point (default: the study's, at most 4000)")
+    p.add_argument("--width", type=positive,
+                   help="wanted full width of the statistic's interval, in the metric's unit")
+    p.add_argument("--level-width", type=positive, default=0.01,
+                   help="half-width in quantile level of the distribution-free interval "
+                   "(default 0.01: p95 within p94-p96)")
+    p.add_argument("--coverage", type=probability, default=0.99,
+                   help="quantile to bound when the spec is on the max (default 0.99)")
+    add_n_jobs_option(p)
+    add_json_option(p, "the plan")
+    p.set_defaults(func=_cmd_plan)
+
     p = sub.add_parser("size", help="cheapest range, mast, centroid and survey that meet a spec "
                        "(Pareto corners, common and independent pixel noise)")
     _add_spec_arguments(p)

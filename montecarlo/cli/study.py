@@ -16,13 +16,19 @@ from montecarlo.cli.common import (
     positive_int,
     quiet,
 )
+from montecarlo.errors import InputError
 
 FORMATS = ("png", "svg", "pdf")
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.engine.checkpoints import Checkpoints
-    from montecarlo.engine.runner import RunOptions, checked_options, run_study
+    from montecarlo.engine.runner import (
+        RunOptions,
+        checked_options,
+        run_study,
+        run_until_decided,
+    )
     from montecarlo.io.files import OutputDir
     from montecarlo.systems import load_study
 
@@ -32,8 +38,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                          chunk_size=args.chunk_size, progress=not quiet(args),
                          checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
     checked_options(study, options)  # before any directory is made
+    if args.until_decided and study.spec is None:
+        raise InputError(f"{args.study}: spec: --until-decided needs a [spec] table to decide")
     with OutputDir(out, "run", {"study": study.header.name}) as staging:
-        result = run_study(study, options)
+        result = run_until_decided(study, options, args.max_trials) if args.until_decided \
+            else run_study(study, options)
         from montecarlo.output.outputs import write_outputs  # matplotlib: only for results
 
         write_outputs(result, staging, options, args.format)
@@ -121,6 +130,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="trials per task, a multiple of the block size (results do not change)")
     p.add_argument("--reference", action="store_true",
                    help="use the literal reference implementation instead of the fast kernel")
+    p.add_argument("--until-decided", action="store_true",
+                   help="double the trials of grid points whose spec verdict is undecided "
+                   "until it is decided or --max-trials is reached")
+    p.add_argument("--max-trials", type=positive_int, default=1_048_576,
+                   help="most trials per grid point with --until-decided (default 1,048,576)")
     p.add_argument("--format", choices=FORMATS, default="png", help="plot file format")
     p.set_defaults(func=_cmd_run)
 

@@ -288,8 +288,11 @@ def _results(study: Study, tasks: Iterator[tuple[int, range]], point_tasks: dict
 
 
 def run_study(study: Study, options: RunOptions = RunOptions(),
-              on_point: Callable[[int], Any] | None = None) -> StudyResult:
+              on_point: Callable[[int], Any] | None = None,
+              reuse: dict[int, PointResult] | None = None) -> StudyResult:
     """Run every grid point of ``study`` (resuming from checkpoints) and return the statistics.
+
+    ``reuse`` maps grid points to results already computed for them (not run again).
 
     Raises
     ------
@@ -306,6 +309,7 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
             if loaded is not None:
                 done[gp.index] = loaded
     resumed = sorted(done)
+    done.update({p: (pr, {}) for p, pr in (reuse or {}).items()})
     todo = [gp.index for gp in study.points if gp.index not in done]
     if checkpoints is not None and done:
         log.warning("%s: resuming, %d of %d grid points already computed (%s)",
@@ -386,6 +390,48 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     origin = {"points": resumed, "from": str(checkpoints.dir), "key": checkpoints.key} \
         if resumed and checkpoints is not None else {}
     return StudyResult(study, points, trials, origin, "reference" if reference else "fast")
+
+
+def run_until_decided(study: Study, options: RunOptions, max_trials: int) -> StudyResult:
+    """Run, then double the trials of every sampled grid point whose spec verdict is
+    ``undecided`` and run it again, until every verdict is decided or ``max_trials`` is reached.
+
+    Each round draws the same nested streams (seed, point, block), so a grown point's first
+    trials are those of the round before; its blocks are computed again (the total work is
+    at most twice that of the last round). Decided points keep their result. Checkpoints are
+    not used.
+
+    Raises
+    ------
+    InputError
+        The study has no ``[spec]`` to decide.
+    """
+    if study.spec is None:
+        raise InputError(f"{study.path}: spec: --until-decided needs a [spec] table to decide")
+    options = replace(options, checkpoint_dir=None)
+    result = run_study(study, options)
+    trials = dict(result.trials)
+    while True:
+        grow = {}
+        for gp, pr in zip(study.points, result.points, strict=True):
+            undecided = "verdict" in pr.summary and (pr.summary["verdict"] == "undecided").any()
+            if undecided and gp.sampled and gp.trials < max_trials:
+                grow[gp.index] = min(2 * gp.trials, max_trials)
+        if not grow:
+            break
+        log.info("%s: %d grid point(s) undecided; running them again with %s trials",
+                 study.header.name, len(grow),
+                 ", ".join(sorted({f"{t:,}" for t in grow.values()})))
+        study = study.with_trials(grow)
+        reuse = {p: pr for p, pr in enumerate(result.points) if p not in grow}
+        result = run_study(study, options, reuse=reuse)
+        trials = {**{p: t for p, t in trials.items() if p not in grow}, **result.trials}
+    left = [gp.index for gp, pr in zip(study.points, result.points, strict=True)
+            if (pr.summary.get("verdict", pd.Series(dtype=str)) == "undecided").any()]
+    if left:
+        log.warning("%s: still undecided at %s trials: grid point(s) %s", study.header.name,
+                    f"{max_trials:,}", ", ".join(map(str, left)))
+    return replace(result, trials=dict(sorted(trials.items())))
 
 
 def about(seconds: float) -> str:

@@ -35,7 +35,7 @@ import json
 import math
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -110,6 +110,11 @@ class Study:
     @property
     def block_size(self) -> int:
         return self.header.block_size or self.system.default_block_size
+
+    def with_trials(self, trials: dict[int, int]) -> Study:
+        """The same study with the trials of some grid points changed (index -> trials)."""
+        points = tuple(replace(gp, trials=trials.get(gp.index, gp.trials)) for gp in self.points)
+        return replace(self, points=points)
 
     def resolved(self) -> dict[str, Any]:
         """Everything that determines the results, as plain JSON-able data."""

@@ -81,4 +81,5 @@ def study_provenance(result: Any, run_options: dict[str, Any]) -> dict[str, Any]
     return provenance("run", study=study.header.name, study_hash=study.hash(),
                       seed=study.header.seed, run_options=run_options, kernel=result.kernel,
                       resumed=result.resumed or None, resolved_study=study.resolved(),
-                      study_path=str(study.path), study_source=study.source)
+                      study_path=str(study.path), study_source=study.source,
+                      point_trials=[gp.trials for gp in study.points])

@@ -60,6 +60,8 @@ def load_result(path: str | Path) -> tuple[StudyResult, pd.DataFrame, dict[str, 
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: unreadable results ({exc})") from None
     study = study_from_dict(prov["study_source"], prov.get("study_path", "<study>"))
+    if prov.get("point_trials"):  # grown by --until-decided
+        study = study.with_trials(dict(enumerate(prov["point_trials"])))
     if study.hash() != prov.get("study_hash"):
         raise InputError(f"{path}: its study no longer builds the same grid with this version "
                          "of montecarlo; run the study again")

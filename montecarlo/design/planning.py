@@ -1,0 +1,118 @@
+"""How many trials: distribution-free order-statistic counts, and a pilot-based plan.
+
+Order statistics need no model of the metric's distribution. The k-th largest of n trials is
+an upper bound of the p-quantile with confidence c when ``P(B >= k) >= c``, B ~ Binomial(n,
+1 - p) (Wilks, 1941; monaco's ``order_stat_TI_n``). With k = 1 (the sample max), n = ln(1 - c)
+/ ln(p). The two-sided interval of a percentile that the summaries report
+(:func:`montecarlo.engine.aggregate.order_statistic_ranks`) narrows in quantile level like
+1 / sqrt(n).
+
+In metric units the width depends on the distribution, so a pilot run measures it: an
+interval's half-width shrinks as 1 / sqrt(n), so ``n = n0 (h0 / h)^2`` trials give half-width h,
+and a verdict is decided once the half-width is below the distance from the statistic to the
+limit. These are estimates from the pilot, not guarantees; ``run --until-decided`` checks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from scipy.special import bdtr
+
+from montecarlo.engine.aggregate import order_statistic_ranks
+from montecarlo.engine.runner import StudyResult
+
+PERCENTILES = {"p50": 0.50, "p90": 0.90, "p95": 0.95, "p99": 0.99}
+
+
+def order_statistic_trials(k: int, p: float, confidence: float) -> int:
+    """Fewest trials n whose k-th largest value bounds the p-quantile from above with the
+    given confidence: ``P(Binomial(n, 1 - p) >= k) >= confidence``.
+
+    ``k = 1`` is Wilks' ``ceil(ln(1 - c) / ln(p))``.
+    """
+    if not (0.0 < p < 1.0 and 0.0 < confidence < 1.0 and k >= 1):
+        raise ValueError("need 0 < p < 1, 0 < confidence < 1 and k >= 1")
+
+    def covers(n: int) -> bool:  # P(B >= k) = 1 - P(B <= k - 1), B ~ Bin(n, 1 - p)
+        return 1.0 - bdtr(k - 1, n, 1.0 - p) >= confidence * (1.0 - 1e-12)  # ties kept
+
+    lo, hi = k - 1, k
+    while not covers(hi):
+        lo, hi = hi, 2 * hi
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if covers(mid) else (mid, hi)
+    return hi
+
+
+def quantile_level_trials(p: float, half_width: float, confidence: float) -> int:
+    """Trials whose distribution-free interval of the p-quantile spans at most ``p +-
+    half_width`` in quantile level (ranks r, s with (s - r) / n <= 2 half_width).
+
+    Found by bisection; the discreteness of the ranks makes the condition not quite monotone
+    in n, so a count a few below the one returned may also do.
+    """
+    if not (0.0 < p < 1.0 and 0.0 < half_width < min(p, 1.0 - p)):
+        raise ValueError("need 0 < half_width < min(p, 1 - p)")
+
+    def narrow(n: int) -> bool:
+        _, r, s = order_statistic_ranks(n, p, confidence)
+        return r >= 1 and s <= n and (s - r) / n <= 2.0 * half_width
+
+    hi = 16
+    while not narrow(hi):
+        hi *= 2
+    lo = hi // 2
+    while hi - lo > 1:  # near-monotone in n; the bisection returns a count that is narrow
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if narrow(mid) else (mid, hi)
+    return hi
+
+
+def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None = None
+               ) -> pd.DataFrame:
+    """Per grid point and variant of the spec's metric (or the plotted one): the pilot's
+    statistic and interval, and the trials estimated to decide the spec verdict and to reach
+    an interval of full ``width`` [the metric's display unit]."""
+    study = result.study
+    spec = study.spec
+    metric = spec.metric if spec else study.metrics[0][1].name
+    stat = spec.statistic if spec and spec.statistic in PERCENTILES else "p95"
+    rows = summary[summary["metric"] == metric]
+    if spec and spec.variant:
+        rows = rows[rows["variant"] == spec.variant]
+    out = rows[["point", *study.sweep_keys, "variant", "unit", "trials", "sampling"]].copy()
+    value = rows[stat].to_numpy(float)
+    lo, hi = rows[f"{stat}_lo"].to_numpy(float), rows[f"{stat}_hi"].to_numpy(float)
+    n0 = rows["trials"].to_numpy(float)
+    half = np.maximum(value - lo, hi - value)
+    out[stat], out[f"{stat}_lo"], out[f"{stat}_hi"] = value, lo, hi
+    sampled = (rows["sampling"] != "enumerated").to_numpy()
+    if spec is not None and spec.statistic in PERCENTILES:
+        distance = np.abs(value - spec.limit)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            need = np.where(distance > 0, np.ceil(n0 * (half / distance) ** 2), np.inf)
+        decided = (rows["verdict"] != "undecided").to_numpy()
+        out["verdict"] = rows["verdict"].to_numpy()
+        out["trials_to_decide"] = np.where(decided | ~sampled, n0, need).astype(np.int64)
+    if width is not None:
+        out[f"trials_for_width_{width:g}"] = np.where(
+            sampled, np.ceil(n0 * (2.0 * half / width) ** 2), n0).astype(np.int64)
+    return out.reset_index(drop=True)
+
+
+def distribution_free_table(p: float, confidence: float, ks: tuple[int, ...] = (1, 2, 3, 5, 10)
+                            ) -> pd.DataFrame:
+    """Trials for a one-sided upper bound of the p-quantile from the k-th largest trial."""
+    return pd.DataFrame({"k (k-th largest)": ks,
+                         "trials": [order_statistic_trials(k, p, confidence) for k in ks]})
+
+
+def wilks_text(p: float, confidence: float) -> str:
+    n = order_statistic_trials(1, p, confidence)
+    return (f"the max of {n:,} trials bounds the {p:.4g}-quantile with {confidence:.0%} "
+            f"confidence (Wilks: ln(1 - {confidence:g}) / ln({p:g}) = "
+            f"{math.log(1 - confidence) / math.log(p):.1f})")

@@ -1,0 +1,123 @@
+"""Trial planning: order-statistic counts against scipy's binomial, pilot-based estimates
+against the runs they predict, and ``run --until-decided`` against direct runs."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.stats import binom
+
+from montecarlo.design import planning
+from montecarlo.engine.aggregate import order_statistic_ranks
+from montecarlo.engine.runner import RunOptions, run_study, run_until_decided
+from montecarlo.systems import study_from_dict
+
+STUDY = {
+    "study": {"name": "plan-small", "system": "ground", "trials": 1000, "seed": 1},
+    "sensor": {"fov_deg": [90.0, 90.0], "pixels": [512, 512]},
+    "mounting": {"psi_deg": 30.0, "theta_deg": 20.0, "gamma_deg": 10.0},
+    "geometry": {"L_m": 50.0, "H_m": 1.0},
+    "errors": {"dx_m": {"dist": "uniform", "bound": 0.1},
+               "dy_m": {"dist": "uniform", "bound": 0.1},
+               "dh1_m": {"dist": "uniform", "bound": 0.1},
+               "dh_m": {"dist": "uniform", "bound": 0.005},
+               "pixel_px": {"dist": "normal", "sigma": 0.5}, "pixel_relation": "common"},
+    "solver": {"variants": ["normalised"]},
+    "spec": {"metric": "rotation_angle", "statistic": "p95", "limit": 4.5},
+    "sweep": [{"geometry.L_m": [25.0, 60.0, 70.0, 100.0]}],
+}
+QUIET = RunOptions(n_jobs=1, progress=False)
+
+
+@pytest.mark.parametrize("k, p, c, n", [(1, 0.95, 0.95, 59), (1, 0.99, 0.95, 299),
+                                        (2, 0.95, 0.95, 93), (1, 0.95, 0.99, 90)])
+def test_wilks_counts_of_the_literature(k, p, c, n):
+    assert planning.order_statistic_trials(k, p, c) == n
+
+
+@given(k=st.integers(1, 20), p=st.floats(0.5, 0.999), c=st.floats(0.5, 0.999))
+@settings(max_examples=60, deadline=None)
+def test_order_statistic_trials_is_the_fewest_that_cover(k, p, c):
+    n = planning.order_statistic_trials(k, p, c)
+    assert binom.sf(k - 1, n, 1 - p) >= c * (1 - 1e-12)
+    assert n == k or binom.sf(k - 1, n - 1, 1 - p) < c
+
+
+@pytest.mark.parametrize("p, delta", [(0.95, 0.01), (0.99, 0.002), (0.5, 0.05)])
+def test_quantile_level_trials_meet_the_width_near_the_normal_count(p, delta):
+    n = planning.quantile_level_trials(p, delta, 0.95)
+    _, r, s = order_statistic_ranks(n, p, 0.95)
+    assert r >= 1 and s <= n and (s - r) / n <= 2 * delta
+    normal = 1.959964 ** 2 * p * (1 - p) / delta ** 2
+    assert 0.9 * normal < n < 1.2 * normal
+
+
+def test_pilot_estimates_predict_the_interval_of_a_larger_run():
+    study = study_from_dict(STUDY)
+    pilot = run_study(study, QUIET)
+    plan = planning.pilot_plan(pilot, pilot.to_frame(), width=0.1)
+    n = int(plan["trials_for_width_0.1"].max())
+    assert 2000 < n < 200_000
+    big = run_study(study_from_dict(STUDY, trials=n), QUIET).to_frame()
+    width = (big["p95_hi"] - big["p95_lo"])[big["metric"] == "rotation_angle"]
+    assert width.max() < 0.1 * 1.3
+    assert set(plan["verdict"]) <= {"meets", "fails", "undecided"}
+    undecided = plan[plan["verdict"] == "undecided"]
+    assert (undecided["trials_to_decide"] > 1000).all()
+
+
+def test_until_decided_grows_only_undecided_points_and_equals_direct_runs():
+    study = study_from_dict(STUDY)
+    first = run_study(study, QUIET).to_frame()
+    assert "undecided" in set(first["verdict"].dropna())
+    grown = run_until_decided(study, QUIET, max_trials=64_000)
+    summary = grown.to_frame()
+    spec_rows = summary.dropna(subset=["verdict"])
+    assert "undecided" not in set(spec_rows["verdict"])
+    for gp in grown.study.points:
+        direct = run_study(study_from_dict(STUDY, trials=gp.trials), QUIET).to_frame()
+        a = summary[summary["point"] == gp.index].reset_index(drop=True)
+        b = direct[direct["point"] == gp.index].reset_index(drop=True)
+        np.testing.assert_array_equal(a["p95"], b["p95"])
+        assert list(a["verdict"].fillna("")) == list(b["verdict"].fillna(""))
+    decided_first = first.dropna(subset=["verdict"]).groupby("point")["verdict"].apply(
+        lambda v: "undecided" not in set(v))
+    for p, was_decided in decided_first.items():
+        assert (grown.study.points[p].trials == 1000) == was_decided
+
+
+def test_until_decided_stops_at_max_trials_and_needs_a_spec(tmp_path):
+    study = study_from_dict(STUDY)
+    capped = run_until_decided(study, QUIET, max_trials=2000)
+    assert max(gp.trials for gp in capped.study.points) == 2000
+    path = tmp_path / "nospec.toml"
+    subprocess.run([sys.executable, "-m", "montecarlo", "init", "ground", str(path)], check=True,
+                   capture_output=True)
+    text = path.read_text()
+    path.write_text(text[:text.index("[spec]")] + text[text.index("[[sweep]]"):])
+    done = subprocess.run([sys.executable, "-m", "montecarlo", "run", str(path),
+                           "--until-decided", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and "--until-decided needs a [spec]" in done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_plan_command_prints_and_writes_json(tmp_path):
+    path = tmp_path / "plan.toml"
+    done = subprocess.run([sys.executable, "-m", "montecarlo", "init", "ground", str(path)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    done = subprocess.run([sys.executable, "-m", "montecarlo", "-q", "plan", str(path),
+                           "--trials", "1000", "--width", "0.1", "--json"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    assert data["order_statistic_trials"][0] == {"k (k-th largest)": 1, "trials": 59}
+    assert data["pilot_trials"] == 1000 and data["points"]
+    done = subprocess.run([sys.executable, "-m", "montecarlo", "plan", str(path),
+                           "--level-width", "0.2"], capture_output=True, text=True)
+    assert done.returncode == 2 and "--level-width" in done.stderr
