@@ -35,6 +35,7 @@ them (the two behave oppositely with range; docs/conventions.md).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Mapping, Sequence
@@ -114,6 +115,9 @@ class RelationSizing:
     slice: pd.DataFrame | None = None
     """Evaluations on a plane (or line) of the plotted knobs through the answer."""
     confirmation: pd.DataFrame | None = None
+    best: pd.Series | None = None
+    """If nothing meets: the design with the lowest upper bound found by :func:`best_design`
+    (knobs; value, lo, hi, ... of the certification seed's run; ``search_hi``)."""
 
     @property
     def answer(self) -> pd.Series | None:
@@ -137,6 +141,9 @@ class SizingResult:
             a = rs.answer
             if a is None:
                 row["status"] = "no design within the bounds meets the spec"
+                if rs.best is not None:
+                    row.update({f"best_{k}": rs.best[k]
+                                for k in (*self.problem.names, "value", "lo", "hi")})
             else:
                 row.update({k: a[k] for k in (*self.problem.names, "value", "lo", "hi",
                                               "verdict", "cost", "limiting", "status")})
@@ -388,10 +395,55 @@ def size_relation(problem: SizingProblem, relation: str, options: SizingOptions
         corners.loc[cheapest(problem, corners, options.order), "cheapest"] = True
     rs = RelationSizing(relation, grid, corners, len(grid) + n_bisect + n_probe + n_cert,
                         uncertified=uncertified)
+    if rs.answer is None:
+        rs.best, n_best = best_design(problem, rs, options)
+        rs.evaluations += n_best
     if options.slice_levels:
         rs.slice = _evaluate_slice(problem, rs, options)
         rs.evaluations += len(rs.slice)
     return rs
+
+
+def best_design(problem: SizingProblem, rs: RelationSizing, options: SizingOptions,
+                cycles: int = 2, line_points: int = 9) -> tuple[pd.Series, int]:
+    """The design with the lowest upper bound of the statistic, when none meets the spec.
+
+    The statistic need not be monotone in a knob (with independent pixel noise the error
+    grows with range at long range and with the geometry's leverage at short range), so the
+    best grid point can lie far from the best design. From it, a coordinate search: each free
+    knob in turn on ``line_points`` geometric levels over its bounds, then on five levels
+    between the neighbours of the best, the others held; ``cycles`` rounds or until nothing
+    improves. The search seed's values are biased low by the selection, so the result is run
+    again with the certification seed, whose values are reported (``search_hi`` keeps the
+    search's).
+
+    Returns the best design's row and the number of evaluations.
+    """
+    run = functools.partial(evaluate, problem, relation=rs.relation, trials=options.trials,
+                            block_size=options.block_size, n_jobs=options.n_jobs)
+    start = rs.grid.loc[rs.grid["hi"].fillna(np.inf).idxmin()]
+    current = {n: float(start[n]) for n in problem.names}
+    best_hi, evaluations = float(start["hi"]), 0
+    for _ in range(cycles):
+        improved = False
+        for knob in (k for k in problem.knobs if k.free):
+            lo, hi, n = knob.lo, knob.hi, line_points
+            for _refine in range(2):
+                values = np.geomspace(lo, hi, n)
+                res = run([{**current, knob.name: float(v)} for v in values], seed=options.seed,
+                          name=f"sizing-{rs.relation}-best")
+                evaluations += n
+                i = int(res["hi"].fillna(np.inf).to_numpy().argmin())
+                if float(res["hi"].iloc[i]) < best_hi:
+                    best_hi, current[knob.name], improved = float(res["hi"].iloc[i]), \
+                        float(values[i]), True
+                lo, hi, n = values[max(i - 1, 0)], values[min(i + 1, len(values) - 1)], 5
+        if not improved:
+            break
+    final = run([current], seed=options.certification_seed,
+                name=f"sizing-{rs.relation}-best-certify").iloc[0].copy()
+    final["search_hi"] = best_hi
+    return final, evaluations + 1
 
 
 def plotted_knobs(problem: SizingProblem, answer: pd.Series | None) -> list[Knob]:
@@ -415,7 +467,8 @@ def _evaluate_slice(problem: SizingProblem, rs: RelationSizing, options: SizingO
     """The plotted knobs on a geometric grid over their bounds, every other knob at the answer
     (or, if nothing meets, at the grid point with the lowest upper bound)."""
     a = rs.answer
-    anchor = a if a is not None else rs.grid.loc[rs.grid["hi"].fillna(np.inf).idxmin()]
+    anchor = a if a is not None else rs.best if rs.best is not None \
+        else rs.grid.loc[rs.grid["hi"].fillna(np.inf).idxmin()]
     axes = plotted_knobs(problem, a)
     n = options.slice_levels if len(axes) == 2 else 2 * options.slice_levels
     values = [np.geomspace(k.lo, k.hi, n) for k in axes]

@@ -44,7 +44,7 @@ def _plot_slice(ax: Any, problem: SizingProblem, rs: RelationSizing, unit: str) 
         return
     others = [n for n in problem.names if n not in {k.name for k in axes}]
     fixed = ", ".join(f"{n}={sl[n].iloc[0]:.3g}" for n in others)
-    where = "through the answer" if a is not None else "through the best grid point (no answer)"
+    where = "through the answer" if a is not None else "through the best design found (no answer)"
     title = RELATION_TEXT[rs.relation].split(" (")[0] + f"\nslice {where}" + (
         f" at {fixed}" if fixed else "")
     if len(axes) == 1:
@@ -164,11 +164,18 @@ def format_result(result: SizingResult) -> str:
                      if rs.uncertified else "")]
         a = rs.answer
         if a is None:
-            best = rs.grid.loc[rs.grid["hi"].fillna(np.inf).idxmin()]
+            grid_best = rs.grid.loc[rs.grid["hi"].fillna(np.inf).idxmin()]
             lines.append("no design within the bounds meets the spec; the best grid point: "
-                         + ", ".join(f"{n}={best[n]:.4g}" for n in p.names)
-                         + f", {req.statistic} {_fmt(best['value'])} "
-                         f"[{_fmt(best['lo'])}, {_fmt(best['hi'])}] {result.unit}")
+                         + ", ".join(f"{n}={grid_best[n]:.4g}" for n in p.names)
+                         + f", {req.statistic} {_fmt(grid_best['value'])} "
+                         f"[{_fmt(grid_best['lo'])}, {_fmt(grid_best['hi'])}] {result.unit}")
+            if rs.best is not None:
+                b = rs.best
+                lines.append("  the best design found (coordinate search from it, lowest upper "
+                             "bound): " + ", ".join(f"{n}={b[n]:.4g}" for n in p.names)
+                             + f", {req.statistic} {_fmt(b['value'])} [{_fmt(b['lo'])}, "
+                             f"{_fmt(b['hi'])}] {result.unit} (certification seed; search "
+                             f"upper bound {_fmt(b['search_hi'])})")
             continue
         lines.append(f"{len(rs.corners)} Pareto-minimal corners; the cheapest:")
         lines.append("  " + ", ".join(f"{n} = {a[n]:.4g}" for n in p.names)
