@@ -6,7 +6,10 @@ Two runs of the same study with the same seed and trials drew the same random nu
 tolerance (default 1e-9, well above the 1e-12 by which the reference and fast paths differ).
 Runs with different seeds or trials are *independent* samples: the difference's interval
 combines the two runs' intervals as independent normal errors, so 'better' and 'worse' mean
-the interval excludes zero. Every metric is an error: smaller (in magnitude) is better.
+the interval excludes zero. The intervals are simultaneous over the rows compared (Bonferroni:
+each at confidence ``1 - (1 - c) / m`` for m rows), so that among many grid points and metrics
+a 'worse' is not a chance finding at the study's confidence c. Every metric is an error:
+smaller (in magnitude) is better.
 """
 
 from __future__ import annotations
@@ -104,14 +107,16 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
     same_draws = paired(a, b)
     confidence = float(a.provenance.get("resolved_study", {}).get("study", {})
                        .get("confidence", 0.95))
-    z = float(ndtri(0.5 + confidence / 2.0))
+    z = float(ndtri(0.5 + confidence / 2.0))  # of each run's own intervals
     va, vb = rows[f"{statistic}_a"].to_numpy(float), rows[f"{statistic}_b"].to_numpy(float)
     diff = vb - va
     exact = same_draws | ((rows["sampling_a"] == "enumerated")
                           & (rows["sampling_b"] == "enumerated")).to_numpy()
     se = np.sqrt(_se(rows, statistic, "a", z) ** 2 + _se(rows, statistic, "b", z) ** 2)
-    lo = np.where(exact, diff, diff - z * se)
-    hi = np.where(exact, diff, diff + z * se)
+    m = max(int((~exact).sum()), 1)
+    z_all = float(ndtri(1.0 - (1.0 - confidence) / (2.0 * m)))  # simultaneous over m rows
+    lo = np.where(exact, diff, diff - z_all * se)
+    hi = np.where(exact, diff, diff + z_all * se)
     tolerance = rtol * np.maximum(np.abs(va), np.abs(vb))
     smaller = np.abs(vb) < np.abs(va)
     verdict = np.where(
