@@ -245,10 +245,15 @@ class MetricStats:
         ``censored`` trials without a value count as larger than every value: a rank that
         falls among them gives +inf.
         """
+        return self.quantiles((p,), of_abs, confidence, censored)[0]
+
+    def quantiles(self, ps: tuple[float, ...], of_abs: bool, confidence: float,
+                  censored: int = 0) -> list[tuple[float, float, float]]:
+        """:meth:`quantile` of several probabilities, the cumulative histogram built once."""
         count = self.count
         n = count + censored
         if n == 0:
-            return math.nan, math.nan, math.nan
+            return [(math.nan, math.nan, math.nan)] * len(ps)
         if of_abs:
             counts, lower, upper = abs_histogram(self.hist), ABS_LOWER, ABS_UPPER
         else:
@@ -264,15 +269,18 @@ class MetricStats:
             return float(min(upper[np.searchsorted(cum, rank)], hi_val)) \
                 if rank <= count else math.inf
 
-        k, r, s = order_statistic_ranks(n, p, confidence)
-        if k <= count:
-            b = int(np.searchsorted(cum, k))
-            est = float(np.clip(0.5 * (lower[b] + upper[b]), lo_val, hi_val))
-        else:
-            est = math.inf
-        lo = lower_edge(r) if r >= 1 else math.nan
-        hi = upper_edge(s) if s <= n else math.nan
-        return est, lo, hi
+        out = []
+        for p in ps:
+            k, r, s = order_statistic_ranks(n, p, confidence)
+            if k <= count:
+                b = int(np.searchsorted(cum, k))
+                est = float(np.clip(0.5 * (lower[b] + upper[b]), lo_val, hi_val))
+            else:
+                est = math.inf
+            lo = lower_edge(r) if r >= 1 else math.nan
+            hi = upper_edge(s) if s <= n else math.nan
+            out.append((est, lo, hi))
+        return out
 
     def coarse_histogram(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Magnitude histogram at 32 bins per octave: occupied (lower, upper, counts)."""
@@ -424,8 +432,8 @@ class PointStats:
                    else math.nan,
                    **{f"invalid_{k}": v for k, v in sorted(inv.items()) if k != "total"},
                    "mean": mean, "std": std}
-            for p, tag in zip(PERCENTILES, PERCENTILE_TAGS, strict=True):
-                est, lo, hi = m.quantile(p, of_abs, confidence)
+            estimates = m.quantiles(tuple(PERCENTILES), of_abs, confidence)
+            for tag, (est, lo, hi) in zip(PERCENTILE_TAGS, estimates, strict=True):
                 if not sampled:
                     lo = hi = math.nan
                 row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
