@@ -223,6 +223,8 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
         else:
             ax0.set_xticks(xs.index, ["\n".join(_fmt(v) for v in row)
                                       for row in xs.itertuples(index=False)], fontsize=7)
+        for ax in axes.ravel():  # the shared axis: one tick size in every panel
+            ax.tick_params(axis="x", labelsize=7)
         for r, row in enumerate(rows):  # each row its own scale: log if it spans decades
             shown = _select(data_k, row_keys, row)
             lo, hi = np.nanmin(shown["p50"]), np.nanmax(shown["p99" if few else "p95"])
@@ -296,7 +298,8 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
             h = _rebin(*hist, m.scale, edges)
             # fractions of all trials: those without a value are not in any bin
             ax.stairs(h / result.points[p].summary["trials"].iloc[0], edges, color=f"C{i}",
-                      label=v, fill=i == 0, alpha=0.35 if i == 0 else 1.0)
+                      label=v if v != "default" else "trials", fill=i == 0,
+                      alpha=0.35 if i == 0 else 1.0)
             p95 = rows.loc[rows["variant"] == v, "p95"]
             if len(p95) and np.isfinite(p95.iloc[0]) and p95.iloc[0] <= xmax:
                 ax.axvline(p95.iloc[0], color=f"C{i}", ls="--", lw=0.8,
@@ -304,7 +307,9 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
         if spec is not None and spec.limit <= xmax:
             ax.axvline(spec.limit, color="k", ls="-.", lw=1, label=_spec_text(study))
         gp = study.points[p]
-        title = ", ".join(short_label(k, gp.values[k]) for k in varying) or f"point {p}"
+        # no line break inside one key's label (non-breaking spaces)
+        title = ", ".join(short_label(k, gp.values[k]).replace(" ", "\u00a0")
+                          for k in varying) or f"point {p}"
         invalid = rows["invalid_fraction"].max()
         if invalid > 0:
             title += f"; no solution: {invalid:.1%}"
