@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from montecarlo.cli import main
@@ -62,6 +64,13 @@ def test_collimation_axis_offsets_named_collimation_absorbed_with_report(tmp_pat
         size = (rep / name).stat().st_size
         assert 10_000 < size < 200_000
     assert "Monte Carlo" in (rep / "report.md").read_text()
+    # the residual plot's numbers: their rms is the report's gap rms
+    table = pd.read_csv(rep / "residuals.csv")
+    for when in ("before", "after"):
+        cols = [c for c in table.columns if f" {when} [arcsec]" in c]
+        assert len(cols) == 2
+        rms = np.sqrt(np.mean(table[cols].to_numpy() ** 2))
+        assert rms == pytest.approx(report["gap"][when]["rms"], rel=1e-6)
 
 
 def test_null_data_report_no_missing_effect(tmp_path, capsys):

@@ -47,6 +47,21 @@ def plot_residuals(d: Diagnosis, view: SystemView, path: Path) -> None:
     save_figure(fig, path, dpi=90)
 
 
+def residual_table(d: Diagnosis, view: SystemView) -> Any:
+    """One row per observation: the plotted quantities (image radius, range, ...) and every
+    residual component before and after adaptation [``view.rms_unit``]."""
+    import pandas as pd
+
+    before = view.raw_residuals(d.before.params) / view.rms_scale
+    after = view.raw_residuals(d.after.params) / view.rms_scale
+    table = pd.DataFrame({label: np.asarray(x, float) for label, x, _ in view.axes})
+    for k, name in enumerate(view.components):
+        table[f"{name} before [{view.rms_unit}]"] = before[:, k]
+        table[f"{name} after [{view.rms_unit}]"] = after[:, k]
+    table.insert(0, "observation", np.arange(len(table)))
+    return table
+
+
 def _log_ticks(axis) -> None:
     """Plain numbers at 1, 2, 5 x 10^k on a logarithmic axis."""
     from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
@@ -108,7 +123,8 @@ def plot_gap(d: Diagnosis, view: SystemView, mc: Mapping[str, FloatArray] | None
 def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
                  report: Mapping[str, Any], mc: Mapping[str, FloatArray] | None = None,
                  trials: int = 0, seed: int = 0) -> list[Path]:
-    """Write ``diagnosis.json``, ``report.md``, ``residuals.png`` and ``gap.png``.
+    """Write ``diagnosis.json``, ``report.md``, ``residuals.csv`` (what the residual plot
+    shows), ``residuals.png`` and ``gap.png``.
 
     ``mc`` holds the Monte Carlo chi2_red of the models before and after (``trials`` data sets
     each from ``seed``), or None. Every file is written under a temporary name and renamed.
@@ -127,6 +143,8 @@ def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
                    "fraction_at_least_measured": float(np.nanmean(
                        v >= report["gap"][k]["chi2_red"]))} for k, v in mc.items()}}
     atomic_write_bytes(outdir / "diagnosis.json", (json.dumps(full, indent=2) + "\n").encode())
+    atomic_write_bytes(outdir / "residuals.csv",
+                       residual_table(d, view).to_csv(index=False).encode())
     text = ["# Diagnosis", "", "```", format_text(report), "```", ""]
     if mc is not None:
         text += ["## Monte Carlo of the residual statistic (study runner)", "",
@@ -141,4 +159,4 @@ def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
         text.append("")
     text += ["![residuals](residuals.png)", "", "![gap](gap.png)", ""]
     atomic_write_bytes(outdir / "report.md", "\n".join(text).encode())
-    return [*written, outdir / "diagnosis.json", outdir / "report.md"]
+    return [*written, outdir / "diagnosis.json", outdir / "residuals.csv", outdir / "report.md"]
