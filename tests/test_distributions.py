@@ -133,3 +133,76 @@ def test_unbounded_shapes_have_no_worst_case_and_no_correlated_pair():
         Distribution("lognormal", 0.0, 1.0, 0.3).worst_case()
     with pytest.raises(ValueError, match="needs a uniform or normal source"):
         correlated_pair(Distribution("triangular", 0.0, 1.0), 0.5, Streams(1, 0, 0), "p", 10)
+
+
+SHAPE_STUDY = """
+[study]
+name = "shapes"
+system = "ground"
+trials = 20000
+seed = 4
+per_trial = true
+
+[sensor]
+fov_deg = [90.0, 90.0]
+pixels = [512, 512]
+
+[mounting]
+psi_deg = 30.0
+theta_deg = 20.0
+gamma_deg = 10.0
+
+[geometry]
+L_m = 100.0
+H_m = 2.0
+
+[errors]
+dx_m = {dx}
+pixel_px = 0.0
+pixel_relation = "common"
+
+[solver]
+variants = ["normalised"]
+"""
+
+
+@pytest.mark.parametrize("source, spread", [
+    ('{dist = "triangular", bound = 0.2}', 0.2 / np.sqrt(6)),
+    ('{dist = "arcsine", bound = 0.2}', 0.2 / np.sqrt(2)),
+    ('{dist = "truncnormal", sigma = 0.1, bound = 0.1}', stats.truncnorm(-1, 1, scale=0.1).std()),
+    ('{dist = "lognormal", median = 0.1, sigma_ln = 0.3}', stats.lognorm(0.3, scale=0.1).std()),
+])
+def test_each_shape_runs_from_a_study_file(tmp_path, source, spread):
+    """Through the command line: the only error source is dx of the shape, so the spread of the
+    yaw error across trials follows the source's standard deviation."""
+    import subprocess
+    import sys
+
+    import pandas as pd
+
+    def spread_of(text: str, name: str) -> float:
+        path = tmp_path / f"{name}.toml"
+        path.write_text(SHAPE_STUDY.format(dx=text))
+        done = subprocess.run([sys.executable, "-m", "montecarlo", "-q", "run", str(path),
+                               "--out", str(tmp_path / name)], capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        trials = pd.read_parquet(tmp_path / name / "trials.parquet")
+        return float(trials["normalised/delta_psi"].std())
+
+    # the yaw error is linear in dx at these sizes: its spread scales with the source's
+    ratio = spread_of(source, "shape") / spread_of(f'{{dist = "normal", sigma = {spread}}}',
+                                                   "normal")
+    assert ratio == pytest.approx(1.0, rel=0.05)
+
+
+def test_a_bad_shape_parameter_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    path = tmp_path / "bad.toml"
+    path.write_text(SHAPE_STUDY.format(dx='{dist = "lognormal", median = -1.0, sigma_ln = 0.3}'))
+    done = subprocess.run([sys.executable, "-m", "montecarlo", "run", str(path), "--out",
+                           str(tmp_path / "out")], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1
+    assert "dx_m" in done.stderr and "median" in done.stderr
+    assert not (tmp_path / "out").exists()
