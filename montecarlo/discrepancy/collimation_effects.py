@@ -37,7 +37,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from montecarlo.discrepancy.problem import Effect, Problem
+from montecarlo.discrepancy.problem import Effect, Problem, is_outlier
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.io.collimation_csv import MirrorData
 from montecarlo.lsq import LeastSquaresFit
@@ -133,7 +133,13 @@ def collimation_problem(data: MirrorData, angle_sigma: float) -> Problem:
                                (data.ins_el - pitch) / angle_sigma], axis=-1)
 
     start = {"frame_heading": mean_heading(data.ins_az - data.theodolite_az)}
-    return Problem("collimation", BASE, CANDIDATES, residuals, start)
+    m = len(data.mirror)
+    names = [mirror if data.mirror.count(mirror) == 1 else f"{mirror}/{s}"
+             for mirror, s in zip(data.mirror, data.sets, strict=True)]
+    observations = tuple((n if names.count(n) == 1 else f"{n} (row {i + 1})", i + 1,
+                          (i, m + i)) for i, n in enumerate(names))
+    return Problem("collimation", BASE, CANDIDATES, residuals, start,
+                   observations=observations)
 
 
 def raw_residuals(data: MirrorData, params: Mapping[str, float]) -> FloatArray:
@@ -201,7 +207,8 @@ def report_view(data: MirrorData, angle_sigma: float) -> SystemView:
         return {"layout": layout, "theodolite_sigma": angle_sigma / math.sqrt(2.0),
                 "ins_sigma": angle_sigma / math.sqrt(2.0), "mount_roll_sigma": 0.0,
                 **{k: float(values.get(k, 0.0)) for k in ("frame_heading", *TRUTH_KEYS)},
-                "fit_effects": ",".join(fit.effects[1:]), "diagnose": 0}
+                "fit_effects": ",".join(e for e in fit.effects[1:] if not is_outlier(e)),
+                "diagnose": 0}
 
     return SystemView("collimation", display_unit, "arcsec", ARCSEC, ("heading", "pitch"),
                       lambda params: raw_residuals(data, params), axes, "discrepancy_collimation",

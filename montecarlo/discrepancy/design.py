@@ -79,7 +79,8 @@ def inject_at_mdb(exact_problem: Callable[[Mapping[str, float]], Problem],
 TRIAL_METRICS = ("chi2", "chi2_red", "p_value", "rms", "detected", "named_any", "n_named",
                  "named_expected", "named_expected_or_group", "named_watched",
                  "expected_within_2sigma", "expected_all_within_2sigma", "chi2_red_after",
-                 "chi2_red_after_in_band")
+                 "chi2_red_after_in_band", "n_wrong_named", "n_flagged", "outliers_found",
+                 "clean_flagged")
 """Per-trial metrics of :func:`score_trials` (see the study hooks' ``run_trials``)."""
 
 
@@ -87,17 +88,28 @@ def score_trials(make_data: Callable[[np.random.Generator], object],
                  make_problem: Callable[[object], Problem],
                  rms_of: Callable[[object, LeastSquaresFit], float], truth: Mapping[str, float],
                  effects: Sequence[str], diagnose_too: bool, expected: str, alpha: float,
-                 rng: np.random.Generator, n: int, watched: Sequence[str] = ()
-                 ) -> dict[str, FloatArray]:
+                 rng: np.random.Generator, n: int, watched: Sequence[str] = (),
+                 spoil: Callable[[object, np.random.Generator], tuple[object, set[str]]]
+                 | None = None) -> dict[str, FloatArray]:
     """Simulate ``n`` data sets; fit ``effects`` to each and optionally diagnose it.
 
     Returns the metrics of :data:`TRIAL_METRICS`, shape (n,), NaN where not applicable (a fit
-    that fails leaves the whole trial NaN). ``truth`` scores ``expected_within_2sigma``;
-    ``watched`` effects are counted in ``named_watched``. The diagnosis sees only the data.
+    that fails leaves the whole trial NaN). ``expected`` is one effect or several, separated
+    by commas: ``named_expected`` means all of them named, ``n_wrong_named`` counts the named
+    effects that are neither expected nor in an expected one's confounded group. ``truth``
+    scores ``expected_within_2sigma``; ``watched`` effects are counted in ``named_watched``.
+    ``spoil(data, rng)`` returns the data with some observations made wrong and their ids:
+    ``outliers_found`` is the fraction of them flagged, ``clean_flagged`` the fraction of the
+    other observations flagged, ``n_flagged`` the number flagged. The diagnosis sees only the
+    data.
     """
     out = {k: np.full(n, np.nan) for k in TRIAL_METRICS}
+    wanted = [e.strip() for e in expected.split(",") if e.strip()]
     for i in range(n):
         data = make_data(rng)
+        wrong: set[str] = set()
+        if spoil is not None:
+            data, wrong = spoil(data, rng)
         problem = make_problem(data)
         try:
             fit = fit_model(problem, effects)
@@ -115,13 +127,21 @@ def score_trials(make_data: Callable[[np.random.Generator], object],
         out["chi2_red_after"][i] = d.after.chi2_red
         lo, hi = chi2_red_band(d.after.dof)
         out["chi2_red_after_in_band"][i] = float(lo <= d.after.chi2_red <= hi)
-        if expected:
-            out["named_expected"][i] = float(expected in d.named)
-            out["named_expected_or_group"][i] = float(any(expected in g for g in d.groups))
-            if expected in d.named:
+        flagged = {t.name.split(":", 1)[1] for t in d.outliers}
+        clean = len(problem.observations) - len(wrong)
+        out["n_flagged"][i] = len(flagged)
+        out["outliers_found"][i] = len(flagged & wrong) / len(wrong) if wrong else np.nan
+        out["clean_flagged"][i] = len(flagged - wrong) / clean if clean else np.nan
+        explained = {m for g in d.groups if set(g) & set(wanted) for m in g}
+        out["n_wrong_named"][i] = len([e for e in d.named if e not in explained])
+        if wanted:
+            out["named_expected"][i] = float(all(e in d.named for e in wanted))
+            out["named_expected_or_group"][i] = float(all(any(e in g for g in d.groups)
+                                                          for e in wanted))
+            if all(e in d.named for e in wanted):
                 est, se = d.after.params, d.after.stderr
                 inside = [abs(est[q] - truth.get(q, 0.0)) <= 2.0 * se[q]
-                          for q in problem.effect(expected).parameters if q in est]
+                          for e in wanted for q in problem.effect(e).parameters if q in est]
                 out["expected_within_2sigma"][i] = float(np.mean(inside))
                 out["expected_all_within_2sigma"][i] = float(all(inside))
     return out

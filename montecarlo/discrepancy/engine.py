@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
@@ -53,7 +53,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from montecarlo.discrepancy.fit import fit_model, jacobian
-from montecarlo.discrepancy.problem import Effect, Problem
+from montecarlo.discrepancy.problem import Effect, Problem, is_outlier, with_outliers
 from montecarlo.lsq import LeastSquaresFit
 
 FloatArray = NDArray[np.float64]
@@ -320,12 +320,17 @@ def separated(winner: CandidateTest, partner: CandidateTest, residual: FloatArra
 @dataclass(frozen=True)
 class Step:
     """One identification step: the model tested, its fit, every candidate's statistics, the
-    winner (None if nothing was significant) and its confounded partners."""
+    winner (None if nothing was significant: an effect, or an observation ``outlier:ID``), its
+    confounded partners, each observation's outlier test (``snoop``) and the named effects
+    dropped after this step's adaptation because the others explain them (``dropped``:
+    name -> Holm-adjusted p-value of its Wald test given the others)."""
 
     fit: LeastSquaresFit
     tests: list[CandidateTest]
     winner: str | None
     group: tuple[str, ...]
+    snoop: list[CandidateTest] = field(default_factory=list)
+    dropped: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -339,9 +344,13 @@ class Diagnosis:
     before, after : fits of the base model and of the final model.
     steps : the identification steps in order; the last one's global test passed, or no
         candidate was significant (``unexplained``).
-    named : effects added, in order.
+    named : effects in the final model, in the order they were added.
     groups : the confounded group of each named effect (the effect first).
     absorbed : candidates (not named) absorbed by the final model.
+    outliers : the outlier test of each observation flagged, when it was flagged (its
+        ``estimate`` is the shift of each residual component [sigma]).
+    dropped : effects named at one step and dropped at a later one (not significant given
+        the others), with their Holm-adjusted p-values then.
     """
 
     problem: Problem
@@ -352,6 +361,8 @@ class Diagnosis:
     named: list[str]
     groups: list[tuple[str, ...]]
     absorbed: list[str]
+    outliers: list[CandidateTest] = field(default_factory=list)
+    dropped: dict[str, float] = field(default_factory=dict)
 
     @property
     def detected(self) -> bool:
@@ -381,41 +392,115 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
 
     See the module docstring. The base model is always fitted and its candidates analysed (for
     the absorbed list and the MDBs), even when the global test passes.
+
+    Observations (``problem.observations``) are candidates of their own (data snooping): each
+    step tests every observation's mean shift, as a second family under Holm's procedure at
+    ``alpha``, and the winner is the effect or observation with the smallest p-value. A
+    flagged observation gets its shift parameters (it no longer weighs on the fit). After each
+    effect is added, every named effect is tested given the others (Wald, Holm at ``alpha``);
+    the least significant of those that are not is dropped and the model refitted, until all
+    are significant. A dropped effect is not named again.
     """
-    fit = fit_model(problem, ())
+    full = with_outliers(problem)
+    effects_view = replace(full, candidates=problem.candidates)
+    outlier_view = replace(full, candidates=full.candidates[len(problem.candidates):])
+    fit = fit_model(full, ())
     before = fit
     steps: list[Step] = []
     named: list[str] = []
     groups: list[tuple[str, ...]] = []
+    outliers: list[CandidateTest] = []
+    dropped: dict[str, float] = {}
     fixed: set[str] = set()
     while True:
-        tests = analyse_candidates(problem, fit, alpha, power, absorbed)
+        tests = analyse_candidates(effects_view, fit, alpha, power, absorbed)
+        snoop = analyse_candidates(outlier_view, fit, alpha, power, absorbed) \
+            if outlier_view.candidates else []
         if fit.p_value >= alpha:
-            steps.append(Step(fit, tests, None, ()))
+            steps.append(Step(fit, tests, None, (), snoop))
             break
-        eligible = [t for t in tests if t.status == "testable" and t.p_adjusted < alpha]
+        eligible = [t for t in (*tests, *snoop) if t.status == "testable"
+                    and t.p_adjusted < alpha and t.name not in dropped]
         if not eligible:
-            steps.append(Step(fit, tests, None, ()))
+            steps.append(Step(fit, tests, None, (), snoop))
             break
         win = min(eligible, key=lambda t: (t.log_p, t.dof))
-        partners = [t for t in tests if t.status == "testable" and t.name != win.name
-                    and canonical_correlation(win, t) > confounded
-                    and not separated(win, t, fit.residual, alpha, absorbed)]
+        if is_outlier(win.name):
+            # an effect that explains the observation's signal (the observation is no longer
+            # significant at its family's level once the effect is fitted) comes first
+            level = alpha / max(1, sum(t.status == "testable" for t in snoop))
+            win = next((t for t in sorted(eligible, key=lambda t: (t.log_p, t.dof))
+                        if not is_outlier(t.name)
+                        and not separated(win, t, fit.residual, level, absorbed)), win)
+        partners = [] if is_outlier(win.name) else [
+            t for t in tests if t.status == "testable" and t.name != win.name
+            and canonical_correlation(win, t) > confounded
+            and not separated(win, t, fit.residual, alpha, absorbed)]
         group = (win.name, *(t.name for t in partners))
-        steps.append(Step(fit, tests, win.name, group))
         start = {**fit.params}
-        effect = problem.effect(win.name)
+        effect = full.effect(win.name)
         for p, v in win.estimate.items():
             lo, hi = effect.bounds[effect.parameters.index(p)]
             start[p] = float(np.clip(v, lo, hi))
         fixed |= set(effect.parameters) - set(win.active)
-        refit = _fit_with_fixed(problem, (*fit.effects[1:], win.name), start, fixed)
+        tested = fit
+        fit = _fit_with_fixed(full, (*fit.effects[1:], win.name), start, fixed)
+        if is_outlier(win.name):
+            outliers.append(win)
+            steps.append(Step(tested, tests, win.name, (), snoop))
+            continue
         named.append(win.name)
         groups.append(group)
-        fit = refit
+        fit, gone = _reconsider(full, fit, [*named, *(t.name for t in outliers)], fixed, alpha)
+        for name, p in gone.items():
+            if is_outlier(name):
+                outliers = [t for t in outliers if t.name != name]
+            else:
+                groups.pop(named.index(name))
+                named.remove(name)
+            dropped[name] = p
+        steps.append(Step(tested, tests, win.name, group, snoop, gone))
     final = steps[-1]
     absorbed_list = [t.name for t in final.tests if t.status == "absorbed"]
-    return Diagnosis(problem, alpha, before, fit, steps, named, groups, absorbed_list)
+    return Diagnosis(problem, alpha, before, fit, steps, named, groups, absorbed_list,
+                     outliers, dropped)
+
+
+def wald_test(fit: LeastSquaresFit, parameters: Sequence[str]) -> tuple[float, int, float]:
+    """Wald statistic ``b' C^-1 b`` of fitted ``parameters`` (those in the fit) against zero,
+    its degrees of freedom and its chi-square p-value."""
+    idx = [fit.names.index(p) for p in parameters if p in fit.names]
+    if not idx:
+        return 0.0, 0, 1.0
+    b = fit.values[idx]
+    T = float(b @ np.linalg.solve(fit.covariance[np.ix_(idx, idx)], b))
+    return T, len(idx), float(stats.chi2.sf(T, len(idx)))
+
+
+def _reconsider(problem: Problem, fit: LeastSquaresFit, named: Sequence[str], fixed: set[str],
+                alpha: float) -> tuple[LeastSquaresFit, dict[str, float]]:
+    """Drop, one at a time, the least significant of the named effects and flagged
+    observations while any is not significant given the others (Wald tests; Holm over the
+    effects, and separately over the observations); returns the refitted model and what was
+    dropped, with its adjusted p-value."""
+    gone: dict[str, float] = {}
+    kept = list(named)
+    while kept:
+        adjusted: dict[str, float] = {}
+        for family in ([n for n in kept if not is_outlier(n)], [n for n in kept if is_outlier(n)]):
+            if len(family) > (1 if family and not is_outlier(family[0]) else 0):
+                p = [wald_test(fit, problem.effect(n).parameters)[2] for n in family]
+                adjusted.update(zip(family, holm(p).tolist(), strict=True))
+        if not adjusted:
+            break
+        worst = max(adjusted, key=lambda n: adjusted[n])
+        if adjusted[worst] < alpha:
+            break
+        kept.remove(worst)
+        gone[worst] = adjusted[worst]
+        model = [e for e in fit.effects[1:] if e not in gone]
+        fit = _fit_with_fixed(problem, model, fit.params, fixed)
+    return fit, gone
 
 
 def _fit_with_fixed(problem: Problem, effects: Sequence[str], start: Mapping[str, float],

@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-from montecarlo.discrepancy.problem import Effect, Problem
+from montecarlo.discrepancy.problem import Effect, Problem, is_outlier
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.errors import InputError
 from montecarlo.geometry.camera import Camera, direction_from_pixels, pixels_from_direction
@@ -271,7 +271,18 @@ def ground_problem(data: GroundData, camera: Camera, pixel_sigma: float,
         return white.reshape(*white.shape[:-2], -1)
 
     candidates, unavailable = candidates_for(data)
-    return Problem("ground", BASE, candidates, residuals, start, unavailable)
+    return Problem("ground", BASE, candidates, residuals, start, unavailable,
+                   observations(data))
+
+
+def observations(data: GroundData) -> tuple[tuple[str, int, tuple[int, ...]], ...]:
+    """Each target's image point as one observation: its name (with the session, if any, or
+    the row where a name repeats), its data row (1-based) and its two whitened residuals."""
+    names = [t if not data.session else f"{t}@{s}"
+             for t, s in zip(data.targets, data.session or [""] * data.n, strict=True)]
+    repeated = {n for n in names if names.count(n) > 1}
+    return tuple((f"{n} (row {i + 1})" if n in repeated else n, i + 1, (2 * i, 2 * i + 1))
+                 for i, n in enumerate(names))
 
 
 def raw_residuals(data: GroundData, camera: Camera, params: Mapping[str, float]) -> FloatArray:
@@ -375,7 +386,8 @@ def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sig
                 **{k: float(values.get(k, 0.0)) for k in ("psi", "theta", "gamma",
                                                           *TRUTH_KEYS)},
                 "extra_truth": json.dumps({q: values[q] for q in shifts if q in values}),
-                "fit_effects": ",".join(fit.effects[1:]), "diagnose": 0}
+                "fit_effects": ",".join(e for e in fit.effects[1:] if not is_outlier(e)),
+                "diagnose": 0}
 
     return SystemView("ground", display_unit, "px", 1.0, ("px", "pz"),
                       lambda params: raw_residuals(data, camera, params), axes,

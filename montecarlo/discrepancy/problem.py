@@ -66,6 +66,9 @@ class Problem:
     start : starting values of the base parameters.
     unavailable : candidate name -> reason it cannot be tested with these data (e.g. no time
         column); such candidates are reported, never tested.
+    observations : (id, row in the data file, indices of its whitened residuals) of each
+        observation that can be wrong on its own (a target's image point, a mirror's
+        readings); empty: no data snooping.
     """
 
     system: str
@@ -74,6 +77,7 @@ class Problem:
     residuals: Residuals
     start: Mapping[str, float]
     unavailable: Mapping[str, str] = field(default_factory=dict)
+    observations: tuple[tuple[str, int, tuple[int, ...]], ...] = ()
 
     def __post_init__(self) -> None:
         names = [p for e in (self.base, *self.candidates) for p in e.parameters]
@@ -93,3 +97,45 @@ class Problem:
     @property
     def parameter_effect(self) -> dict[str, Effect]:
         return {p: e for e in (self.base, *self.candidates) for p in e.parameters}
+
+
+OUTLIER = "outlier:"
+"""Prefix of the effect (and its parameters) that shifts one observation."""
+
+
+def outlier_effect(obs_id: str, rows: tuple[int, ...]) -> Effect:
+    """The mean-shift model of one observation: a shift of each of its whitened residuals
+    [units of the stated noise, sigma], unbounded."""
+    return Effect(f"{OUTLIER}{obs_id}", tuple(f"{OUTLIER}{obs_id}[{k}]" for k in range(len(rows))),
+                  ((-np.inf, np.inf),) * len(rows), (1.0,) * len(rows),
+                  f"observation {obs_id} off by more than its noise [sigma]")
+
+
+def with_outliers(problem: Problem) -> Problem:
+    """``problem`` with one mean-shift effect per observation among its candidates.
+
+    Observation shifts enter the whitened residuals directly: ``r - E b``, E the observation's
+    rows. Baarda's data snooping is then the identification test of these effects.
+    """
+    if not problem.observations:
+        return problem
+    effects = tuple(outlier_effect(oid, rows) for oid, _, rows in problem.observations)
+    where = [(p, row) for e, (_, _, rows) in zip(effects, problem.observations, strict=True)
+             for p, row in zip(e.parameters, rows, strict=True)]
+    base = problem.residuals
+
+    def residuals(values: Mapping[str, FloatArray]) -> FloatArray:
+        r = np.asarray(base(values), dtype=float)
+        shifts = [(row, np.asarray(values[p], float)) for p, row in where if p in values]
+        batch = max((v.shape[0] for _, v in shifts if v.ndim), default=0)
+        r = np.array(np.broadcast_to(r, (batch, r.shape[-1])) if batch and r.ndim == 1 else r)
+        for row, v in shifts:
+            r[..., row] -= v.reshape(-1) if v.ndim else v
+        return r
+
+    return Problem(problem.system, problem.base, (*problem.candidates, *effects), residuals,
+                   problem.start, problem.unavailable, problem.observations)
+
+
+def is_outlier(name: str) -> bool:
+    return name.startswith(OUTLIER)

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from montecarlo.discrepancy.engine import CandidateTest, Diagnosis, chi2_red_band
+from montecarlo.discrepancy.problem import OUTLIER, is_outlier
 from montecarlo.lsq import LeastSquaresFit
 
 FloatArray = NDArray[np.float64]
@@ -51,8 +52,12 @@ class SystemView:
     study_params: Callable[[LeastSquaresFit], dict[str, Any]]
     shift_unit: Callable[[str], tuple[str, float]] | None = None
 
+    def unit(self, name: str) -> tuple[str, float]:
+        """Display unit of a parameter; an observation's shift is in sigma."""
+        return ("sigma", 1.0) if is_outlier(name) else self.display_unit(name)
+
     def small(self, name: str) -> tuple[str, float]:
-        return (self.shift_unit or self.display_unit)(name)
+        return ("sigma", 1.0) if is_outlier(name) else (self.shift_unit or self.display_unit)(name)
 
 
 def residual_rms(view: SystemView, fit: LeastSquaresFit) -> float:
@@ -61,13 +66,45 @@ def residual_rms(view: SystemView, fit: LeastSquaresFit) -> float:
 
 
 def _show(view: SystemView, values: Mapping[str, float]) -> dict[str, float]:
-    return {k: v / view.display_unit(k)[1] for k, v in values.items()}
+    return {k: v / view.unit(k)[1] for k, v in values.items()}
 
 
 def _model(view: SystemView, fit: LeastSquaresFit) -> dict[str, Any]:
     return {"effects": list(fit.effects), "parameters": _show(view, fit.params),
             "stderr": _show(view, fit.stderr),
-            "units": {k: view.display_unit(k)[0] for k in fit.names}}
+            "units": {k: view.unit(k)[0] for k in fit.names}}
+
+
+def _outliers(d: Diagnosis, view: SystemView) -> list[dict[str, Any]]:
+    """Each flagged observation: its id and data row, its residual under the final model
+    (which does not fit it) [view unit], its shift [sigma], Holm-adjusted p-value and MDB."""
+    rows = {f"{OUTLIER}{oid}": row for oid, row, _ in d.problem.observations}
+    raw = view.raw_residuals(d.after.params) / view.rms_scale
+    out = []
+    for t in d.outliers:
+        row = rows[t.name]
+        out.append({"id": t.name[len(OUTLIER):], "observation": row,
+                    "size": dict(zip(view.components, raw[row - 1].tolist(), strict=True)),
+                    "size_unit": view.rms_unit,
+                    "size_sigma": float(np.linalg.norm(list(t.estimate.values()))),
+                    "p_value": t.p_adjusted, "statistic": t.statistic, "dof": t.dof,
+                    "mdb_sigma": float(max(t.mdb.values()))})
+    return out
+
+
+def largest_residuals(d: Diagnosis, view: SystemView, k: int = 5) -> list[dict[str, Any]]:
+    """The ``k`` observations with the largest standardised residuals under the final model
+    and where they sit (the values of the view's plot axes)."""
+    if not d.problem.observations:
+        return []
+    r = d.after.residual
+    norms = [(float(np.linalg.norm(r[list(rows)])), oid, row)
+             for oid, row, rows in d.problem.observations]
+    out = []
+    for norm, oid, row in sorted(norms, reverse=True)[:k]:
+        where = {label: float(np.asarray(x)[row - 1]) for label, x, _ in view.axes}
+        out.append({"id": oid, "observation": row, "standardised": norm, "where": where})
+    return out
 
 
 def _gap(view: SystemView, fit: LeastSquaresFit) -> dict[str, float]:
@@ -96,9 +133,11 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
     def candidate(t: CandidateTest) -> dict[str, Any]:
         return {"name": t.name, "status": t.status, "statistic": t.statistic, "dof": t.dof,
                 "p_value": t.p_value, "p_adjusted": t.p_adjusted,
-                "mdb": _show(view, t.mdb), "units": {k: view.display_unit(k)[0] for k in t.mdb},
-                "influence": {k: v / view.small(k)[1] for k, v in t.influence.items()},
-                "influence_units": {k: view.small(k)[0] for k in t.influence},
+                "mdb": _show(view, t.mdb), "units": {k: view.unit(k)[0] for k in t.mdb},
+                "influence": {k: v / view.small(k)[1] for k, v in t.influence.items()
+                              if not is_outlier(k)},
+                "influence_units": {k: view.small(k)[0] for k in t.influence
+                                    if not is_outlier(k)},
                 "retained": t.retained, "absorbed_by": t.absorbed_by, "reason": t.reason}
 
     return {
@@ -109,6 +148,9 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "named_effects": named,
         "confounded_groups": [list(g) for g in d.groups if len(g) > 1],
         "absorbed": d.absorbed,
+        "outliers": _outliers(d, view),
+        "dropped_effects": [{"name": n, "p_value": p} for n, p in d.dropped.items()],
+        "largest_residuals": largest_residuals(d, view),
         "gap": {"before": _gap(view, d.before), "after": _gap(view, d.after)},
         "rms_unit": view.rms_unit,
         "alpha": d.alpha,
@@ -119,8 +161,8 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "candidates": [candidate(t) for t in d.steps[0].tests],
         "candidates_after": [candidate(t) for t in d.steps[-1].tests],
         "steps": [{"model": list(s.fit.effects), "chi2_red": s.fit.chi2_red,
-                   "p_value": s.fit.p_value, "winner": s.winner, "group": list(s.group)}
-                  for s in d.steps],
+                   "p_value": s.fit.p_value, "winner": s.winner, "group": list(s.group),
+                   "dropped": s.dropped} for s in d.steps],
     }
 
 
@@ -149,13 +191,27 @@ def format_text(report: Mapping[str, Any]) -> str:
     for group in report["confounded_groups"]:
         lines.append(f"confounded group (the data cannot tell these apart): "
                      f"{', '.join(group)}")
+    for o in report["outliers"]:
+        size = ", ".join(f"{k} {v:+.3g}" for k, v in o["size"].items())
+        lines.append(f"outlier: observation {o['id']} (row {o['observation']}): {size} "
+                     f"{o['size_unit']} off the model ({o['size_sigma']:.1f} sigma; MDB "
+                     f"{o['mdb_sigma']:.1f} sigma), p = {_p(o['p_value'])} (Holm); left out "
+                     "of the fit")
+    for e in report["dropped_effects"]:
+        lines.append(f"dropped: {e['name']} (named earlier, not significant given the "
+                     f"others: p = {_p(e['p_value'])}, Holm)")
     if report["absorbed"]:
         lines.append(f"absorbed by the model (never named): {', '.join(report['absorbed'])}")
     if report["detected"]:
         lines.append(f"adapted model: chi2_red = {a['chi2_red']:.3f} (dof {a['dof']}), "
                      f"p = {a['p_value']:.3g}, rms = {a['rms']:.4g} {unit}")
     if report["unexplained"]:
-        lines.append("a misfit remains that no candidate explains")
+        lines.append("a misfit remains that no candidate explains; the largest standardised "
+                     "residuals are at:")
+        for r in report["largest_residuals"]:
+            where = ", ".join(f"{k} {v:.4g}" for k, v in r["where"].items())
+            lines.append(f"  {r['id']} (row {r['observation']}): {r['standardised']:.1f} "
+                         f"sigma; {where}")
     lines.append("")
     lines.append(f"{'candidate (base model)':<24} {'status':<12} {'T':>9} {'dof':>3} "
                  f"{'p (Holm)':>9}  MDB")

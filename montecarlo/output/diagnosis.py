@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from montecarlo.discrepancy.engine import Diagnosis, chi2_red_band
+from montecarlo.discrepancy.problem import OUTLIER
 from montecarlo.discrepancy.view import SystemView, format_text, residual_rms
 from montecarlo.io.files import atomic_write_bytes, save_figure
 
@@ -25,6 +26,7 @@ def plot_residuals(d: Diagnosis, view: SystemView, path: Path) -> None:
     before = view.raw_residuals(d.before.params) / view.rms_scale
     after = view.raw_residuals(d.after.params) / view.rms_scale
     n = len(view.axes)
+    flagged = {f"{OUTLIER}{oid}": row for oid, row, _ in d.problem.observations}
     fig = Figure(figsize=(3.4 * n, 5.6), layout="constrained")
     axes = fig.subplots(2, n, squeeze=False, sharey="row")
     for j, (label, x, components) in enumerate(view.axes):
@@ -38,12 +40,20 @@ def plot_residuals(d: Diagnosis, view: SystemView, path: Path) -> None:
                         color=f"C{k}" if i else ("0.3" if k == 0 else "0.6"), label=name)
             ax.set_xlabel(label)
             ax.grid(alpha=0.3)
+            for t in d.outliers if i == 1 else ():  # point the flagged observations out
+                row = flagged[t.name] - 1
+                y = shown[row, int(np.argmax(np.abs(shown[row])))]
+                ax.annotate(t.name[len(OUTLIER):], (np.asarray(x)[row], y), fontsize=7,
+                            color="C3", xytext=(4, 4), textcoords="offset points")
+                ax.plot(np.asarray(x)[row], y, "o", ms=9, mfc="none", color="C3")
             if j == 0:
                 ax.set_ylabel(f"{title}: residual [{view.rms_unit}]")
             if i == 1:
                 ax.legend(fontsize=7)
     names = ", ".join(d.named) or "none"
-    fig.suptitle(f"{view.system}: residuals (measured − model); named: {names}")
+    flagged_text = f"; outliers (circled, left out of the fit): {len(d.outliers)}" \
+        if d.outliers else ""
+    fig.suptitle(f"{view.system}: residuals (measured − model); named: {names}{flagged_text}")
     save_figure(fig, path, dpi=90)
 
 

@@ -8,6 +8,7 @@ Monte Carlo gap of a diagnosis report (:func:`monte_carlo_gap`).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Mapping
@@ -42,6 +43,7 @@ GROUND_DEFAULTS: dict[str, float | int | str] = {
     "c": 1.0, "k": ge.STANDARD_REFRACTION,
     "extra_truth": "",
     "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
+    "n_outliers": 0, "outlier_size": 0.0,
 }
 """Defaults of :func:`run_ground_trials` (SI units, radians); see its docstring."""
 
@@ -71,7 +73,11 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
         the base model). ``diagnose`` [0/1]: also run the whole DIA diagnosis. ``expected``
         [text]: the effect injected, for scoring. ``inject_mdb`` [1]: if > 0, ``expected`` is
         injected at this multiple of its design MDB along its default direction (replacing its
-        values above). ``alpha`` [1]: significance (0.01).
+        values above); ``expected`` may list several effects, separated by commas (each
+        injected in turn, given the ones before). ``alpha`` [1]: significance (0.01).
+        ``n_outliers`` [count] (0): targets whose image point is moved by ``outlier_size``
+        [multiples of ``pixel_sigma``] in a random direction (scored by ``outliers_found``
+        and ``clean_flagged``).
     rng : numpy Generator, the only source of randomness.
     n : number of simulated data sets.
 
@@ -104,18 +110,41 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
     expected = str(p["expected"])
     effects = tuple(e for e in str(p["fit_effects"]).split(",") if e.strip())
     effects = tuple(e.strip() for e in effects)
-    if float(p["inject_mdb"]) > 0:
-        if not expected:
-            raise ValueError("inject_mdb needs an expected effect")
-        truth = inject_at_mdb(
-            lambda tr: ge.exact_problem(layout, camera, tr, sigma, survey), truth, expected,
-            float(p["inject_mdb"]), alpha)
+    truth = _inject(lambda tr: ge.exact_problem(layout, camera, tr, sigma, survey), truth, p)
+    count, size = int(p["n_outliers"]), float(p["outlier_size"]) * sigma
+
+    def spoil(data: GroundData, g: np.random.Generator) -> tuple[GroundData, set[str]]:
+        rows = g.choice(data.n, count, replace=False)
+        pixels = data.pixels.copy()
+        pixels[rows] += size * _directions(g, count)
+        ids = {ge.observations(data)[r][0] for r in rows}
+        return dataclasses.replace(data, pixels=pixels), ids
+
     return score_trials(
         lambda g: ge.simulate(layout, camera, truth, sigma, survey, g),
         lambda data: ge.ground_problem(data, camera, sigma, survey),
         lambda data, fit: float(np.sqrt(np.mean(ge.raw_residuals(data, camera, fit.params) ** 2))),
         truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
-        watched=("refraction", "earth_curvature"))
+        watched=("refraction", "earth_curvature"), spoil=spoil if count else None)
+
+
+def _inject(exact: Any, truth: dict[str, float], p: Mapping[str, Any]) -> dict[str, float]:
+    """Each ``expected`` effect whose parameters are all zero in ``truth``, injected at
+    ``inject_mdb`` times its design MDB (given the effects injected before it)."""
+    multiple = float(p["inject_mdb"])
+    wanted = [e.strip() for e in str(p["expected"]).split(",") if e.strip()]
+    if multiple > 0 and not wanted:
+        raise ValueError("inject_mdb needs an expected effect")
+    for e in wanted if multiple > 0 else ():
+        if all(truth.get(q, 0.0) == 0.0 for q in exact(truth).effect(e).parameters):
+            truth = inject_at_mdb(exact, truth, e, multiple, float(p["alpha"]))
+    return truth
+
+
+def _directions(g: np.random.Generator, count: int) -> FloatArray:
+    """``count`` random unit vectors in the plane of an observation's two components."""
+    phi = g.uniform(0.0, 2.0 * np.pi, count)
+    return np.column_stack([np.cos(phi), np.sin(phi)])
 
 
 GROUND = ParamSystem(
@@ -148,6 +177,7 @@ COLLIMATION_DEFAULTS: dict[str, float | int | str] = {
     "frame_heading": math.radians(30.0),
     **dict.fromkeys(ce.TRUTH_KEYS, 0.0),
     "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
+    "n_outliers": 0, "outlier_size": 0.0,
 }
 """Defaults of :func:`run_collimation_trials` (SI units, radians); see its docstring."""
 
@@ -171,7 +201,9 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
         ``ins_heading_bias``, ``ins_pitch_bias``, ``theodolite_c`` [rad];
         ``ins_heading_scale``, ``ins_pitch_scale`` [1]): true values (0).
         ``fit_effects``, ``diagnose``, ``expected``, ``inject_mdb``, ``alpha``: as in
-        :func:`run_ground_trials`.
+        :func:`run_ground_trials`. ``n_outliers`` [count] (0): mirrors whose theodolite
+        reading is off by ``outlier_size`` [multiples of the per-component noise] in a random
+        direction.
     rng : numpy Generator, the only source of randomness.
     n : number of simulated calibrations.
 
@@ -195,17 +227,25 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
     alpha = float(p["alpha"])
     expected = str(p["expected"])
     effects = tuple(e.strip() for e in str(p["fit_effects"]).split(",") if e.strip())
-    if float(p["inject_mdb"]) > 0:
-        if not expected:
-            raise ValueError("inject_mdb needs an expected effect")
-        truth = inject_at_mdb(lambda tr: ce.exact_problem(layout, tr, sigma), truth, expected,
-                                  float(p["inject_mdb"]), alpha)
+    truth = _inject(lambda tr: ce.exact_problem(layout, tr, sigma), truth, p)
+    count, size = int(p["n_outliers"]), float(p["outlier_size"]) * sigma
+
+    def spoil(data: MirrorData, g: np.random.Generator) -> tuple[MirrorData, set[str]]:
+        rows = g.choice(len(data.mirror), count, replace=False)
+        shift = size * _directions(g, count)
+        az, el = data.theodolite_az.copy(), data.theodolite_el.copy()
+        az[rows] += shift[:, 0] / np.cos(el[rows])  # a misreading of the theodolite
+        el[rows] += shift[:, 1]
+        observations = ce.collimation_problem(data, sigma).observations
+        ids = {observations[r][0] for r in rows}
+        return dataclasses.replace(data, theodolite_az=az, theodolite_el=el), ids
+
     return score_trials(
         lambda g: ce.simulate(layout, truth, noise, g),
         lambda data: ce.collimation_problem(data, sigma),
         lambda data, fit: float(np.sqrt(np.mean(ce.raw_residuals(data, fit.params) ** 2))),
         truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
-        watched=("theodolite_collimation",))
+        watched=("theodolite_collimation",), spoil=spoil if count else None)
 
 
 COLLIMATION = ParamSystem(

@@ -1,0 +1,131 @@
+"""Data snooping in the diagnosis: a wrong observation is named by its id and left out, an
+effect named early and explained later by others is dropped, and null data stay clean."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy.engine import diagnose, wald_test
+from montecarlo.discrepancy.fit import fit_model
+from montecarlo.discrepancy.problem import outlier_effect, with_outliers
+from montecarlo.geometry.camera import Camera
+from montecarlo.systems import discrepancy as sd
+
+CAM = Camera.from_degrees(90.0, 90.0, 512, 512)
+MOUNT = dict(ge.DEFAULT_MOUNTING)
+LAYOUT = sd.default_layout(CAM, MOUNT)
+SIGMA = 0.3
+
+
+def ground_data(seed, truth=MOUNT):
+    return ge.simulate(LAYOUT, CAM, truth, SIGMA, 0.0, rng=seed)
+
+
+def shifted(data, row, shift):
+    pixels = data.pixels.copy()
+    pixels[row] += shift
+    return dataclasses.replace(data, pixels=pixels)
+
+
+def test_a_shift_of_an_observation_moves_only_its_whitened_residuals():
+    problem = with_outliers(ge.ground_problem(ground_data(1), CAM, SIGMA))
+    effect = problem.effect("outlier:T05")
+    base = problem.residuals(dict(problem.start))
+    moved = problem.residuals({**problem.start, effect.parameters[0]: 2.0})
+    diff = base - moved
+    assert diff[8] == pytest.approx(2.0) and np.count_nonzero(diff) == 1
+    batch = problem.residuals({effect.parameters[1]: np.array([[0.0], [3.0]])})
+    assert batch.shape == (2, base.size) and batch[0, 9] - batch[1, 9] == pytest.approx(3.0)
+    assert outlier_effect("A", (0, 1)).parameters == ("outlier:A[0]", "outlier:A[1]")
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_one_target_six_pixels_off_is_named_and_nothing_else(seed):
+    data = shifted(ground_data(seed), 7, [6.0, 0.0])
+    d = diagnose(ge.ground_problem(data, CAM, SIGMA))
+    assert [t.name for t in d.outliers] == [f"outlier:{data.targets[7]}"]
+    assert d.named == [] and not d.unexplained
+    est = d.outliers[0].estimate
+    assert est["outlier:T08[0]"] ** 2 + est["outlier:T08[1]"] ** 2 == pytest.approx(
+        (6.0 / SIGMA) ** 2, rel=0.2)
+    # the mounting is no longer pulled by the wrong target
+    clean = fit_model(ge.ground_problem(ground_data(seed), CAM, SIGMA), ())
+    for k in ("psi", "theta", "gamma"):
+        assert abs(d.after.params[k] - clean.params[k]) < 3 * clean.stderr[k]
+
+
+def test_two_wrong_targets_are_both_named():
+    data = shifted(shifted(ground_data(11), 7, [6.0, 0.0]), 20, [0.0, -4.0])
+    d = diagnose(ge.ground_problem(data, CAM, SIGMA))
+    assert {t.name for t in d.outliers} == {"outlier:T08", "outlier:T21"} and d.named == []
+
+
+def test_an_outlier_and_an_effect_together():
+    truth = {**MOUNT, "k1": -0.008}
+    data = shifted(ground_data(3, truth), 12, [0.0, 5.0])
+    d = diagnose(ge.ground_problem(data, CAM, SIGMA))
+    assert d.named == ["radial_distortion"]
+    assert [t.name for t in d.outliers] == ["outlier:T13"]
+    assert d.after.params["k1"] == pytest.approx(-0.008, abs=4 * d.after.stderr["k1"])
+
+
+def test_a_theodolite_misreading_of_one_mirror_is_named():
+    """20 arc-seconds on one azimuth reading (the stated noise is 2.83 per component)."""
+    from montecarlo.seed003.model import Noise
+
+    sigma = math.radians(2.83 / 3600)
+    data = ce.simulate(ce.paper_mirrors(), {}, Noise(), rng=4)
+    az = data.theodolite_az.copy()
+    az[3] += math.radians(20 / 3600)
+    d = diagnose(ce.collimation_problem(dataclasses.replace(data, theodolite_az=az), sigma))
+    assert [t.name for t in d.outliers] == [f"outlier:{data.mirror[3]}"] and d.named == []
+
+
+def test_null_data_flag_and_name_nothing_in_nearly_all_sets():
+    flagged = sum(bool(diagnose(ge.ground_problem(ground_data(100 + s), CAM, SIGMA)).outliers
+                       or diagnose(ge.ground_problem(ground_data(100 + s), CAM, SIGMA)).named)
+                  for s in range(60))
+    assert flagged <= 3  # alpha = 1 %: about 0.6 expected
+
+
+def test_wald_test_of_a_fitted_effect():
+    truth = {**MOUNT, "k1": -0.004}
+    problem = ge.ground_problem(ground_data(2, truth), CAM, SIGMA)
+    fit = fit_model(problem, ("radial_distortion",))
+    T, dof, p = wald_test(fit, ("k1",))
+    assert dof == 1 and pytest.approx((fit.params["k1"] / fit.stderr["k1"]) ** 2) == T
+    assert p < 1e-6
+    assert wald_test(fit, ("nothing",)) == (0.0, 0, 1.0)
+
+
+def toy_problem(seed=2, n=20):
+    """Linear toy: y = 1 + 3 b + 2.2 c + noise, with a candidate a along b + c (plus a little
+    of its own): a explains most of the signal at first, b and c all of it."""
+    from montecarlo.discrepancy.problem import Effect, Problem
+
+    rng = np.random.default_rng(seed)
+    cb, cc = rng.standard_normal(n), rng.standard_normal(n)
+    ca = (cb + cc) / math.sqrt(2) + 0.2 * rng.standard_normal(n)
+    y = 1.0 + 3.0 * cb + 2.2 * cc + rng.standard_normal(n)
+    columns = {"a": ca, "b": cb, "c": cc}
+
+    def residuals(values):
+        v = {k: np.asarray(values.get(k, 0.0), float) for k in ("mu", *columns)}
+        return y - v["mu"] - sum(v[k] * col for k, col in columns.items())
+
+    effects = tuple(Effect(k, (k,), ((-10.0, 10.0),), (1e-3,)) for k in columns)
+    return Problem("toy", Effect("base", ("mu",), ((-np.inf, np.inf),), (1e-3,)), effects,
+                   residuals, {"mu": 0.0})
+
+
+def test_an_effect_named_first_and_explained_by_later_ones_is_dropped():
+    d = diagnose(toy_problem())
+    assert d.steps[0].winner == "a"
+    assert sorted(d.named) == ["b", "c"] and list(d.dropped) == ["a"]
+    assert d.dropped["a"] >= 0.01
+    assert "a" not in d.after.effects and not d.unexplained
+    assert any(s.dropped for s in d.steps)
