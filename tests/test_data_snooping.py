@@ -129,3 +129,30 @@ def test_an_effect_named_first_and_explained_by_later_ones_is_dropped():
     assert d.dropped["a"] >= 0.01
     assert "a" not in d.after.effects and not d.unexplained
     assert any(s.dropped for s in d.steps)
+
+
+def test_an_effect_standing_in_for_another_is_swapped_for_it():
+    """Another camera (60 x 45 deg, 0.2 px): radial distortion and a target height scale at
+    2 MDB each. Step by step, focal scale comes first and stays (the two together fit);
+    swapping it for radial distortion lowers Akaike's criterion."""
+    from montecarlo.discrepancy.design import inject_at_mdb
+    from montecarlo.tools.acceptance import OTHER_DESIGNS
+
+    p = {**sd.GROUND_DEFAULTS, **OTHER_DESIGNS["ground"]}
+    camera = Camera(p["fov_yaw"], p["fov_pitch"], p["n_x"], p["n_z"])
+    truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", *ge.TRUTH_KEYS)}
+    layout = sd.default_layout(camera, truth)
+
+    def exact(tr):
+        return ge.exact_problem(layout, camera, tr, p["pixel_sigma"], p["survey_sigma"])
+
+    for effect in ("radial_distortion", "target_height_scale"):
+        truth = inject_at_mdb(exact, truth, effect, 2.0)
+    data = ge.simulate(layout, camera, truth, p["pixel_sigma"], p["survey_sigma"],
+                       np.random.default_rng(0))
+    d = diagnose(ge.ground_problem(data, camera, p["pixel_sigma"], p["survey_sigma"]))
+    assert [s.winner for s in d.steps][:2] == ["focal_scale", "target_height_scale"]
+    assert [(o, i) for o, i, *_ in d.swaps] == [("focal_scale", "radial_distortion")]
+    assert d.swaps[0][3] < d.swaps[0][2]
+    assert sorted(d.named) == ["radial_distortion", "target_height_scale"]
+    assert d.effect_result("radial_distortion")["swapped_in"] is True

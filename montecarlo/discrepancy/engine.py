@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, stats
 
-from montecarlo.discrepancy.fit import fit_model, jacobian
+from montecarlo.discrepancy.fit import FitError, fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier, with_outliers
 from montecarlo.lsq import LeastSquaresFit
 
@@ -363,6 +363,9 @@ class Diagnosis:
     absorbed: list[str]
     outliers: list[CandidateTest] = field(default_factory=list)
     dropped: dict[str, float] = field(default_factory=dict)
+    swaps: list[tuple[str, str, float, float]] = field(default_factory=list)
+    """(effect out, effect in, AIC before, AIC after) of each swap that improved the final
+    model (see :func:`diagnose`)."""
 
     @property
     def detected(self) -> bool:
@@ -374,15 +377,20 @@ class Diagnosis:
         return bool(self.after.p_value < self.alpha)
 
     def effect_result(self, name: str) -> dict[str, object]:
-        """Fitted parameters and 1-sigma of a named effect, and its identification p-value."""
-        step = next(s for s in self.steps if s.winner == name)
-        test = next(t for t in step.tests if t.name == name)
+        """Fitted parameters and 1-sigma of a named effect, and its identification p-value
+        (for an effect swapped in at the end: its Wald test in the final model)."""
         fit = self.after
         params = {p: fit.params[p] for p in self.problem.effect(name).parameters
                   if p in fit.params}
-        return {"name": name, "parameters": params,
-                "stderr": {p: fit.stderr[p] for p in params},
-                "p_value": test.p_adjusted, "p_value_unadjusted": test.p_value,
+        out: dict[str, object] = {"name": name, "parameters": params,
+                                  "stderr": {p: fit.stderr[p] for p in params}}
+        step = next((s for s in self.steps if s.winner == name), None)
+        if step is None:
+            T, dof, p = wald_test(fit, tuple(params))
+            return {**out, "p_value": p, "p_value_unadjusted": p, "statistic": T, "dof": dof,
+                    "swapped_in": True}
+        test = next(t for t in step.tests if t.name == name)
+        return {**out, "p_value": test.p_adjusted, "p_value_unadjusted": test.p_value,
                 "statistic": test.statistic, "dof": test.dof}
 
 
@@ -412,10 +420,31 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     outliers: list[CandidateTest] = []
     dropped: dict[str, float] = {}
     fixed: set[str] = set()
+    retried = False
     while True:
         tests = analyse_candidates(effects_view, fit, alpha, power, absorbed)
         snoop = analyse_candidates(outlier_view, fit, alpha, power, absorbed) \
             if outlier_view.candidates else []
+        if fit.p_value >= alpha and (retried or not outliers):
+            steps.append(Step(fit, tests, None, (), snoop))
+            break
+        if not retried and outliers and (fit.p_value >= alpha or not any(
+                t.status == "testable" and t.p_adjusted < alpha and t.name not in dropped
+                for t in (*tests, *snoop))):
+            # before stopping: would one effect explain what the flagged observations took?
+            retried = True
+            others = [t.name for t in tests if t.status == "testable" and t.name not in dropped]
+            alt = _effect_for_outliers(full, fit, [t.name for t in outliers], others, fixed)
+            if alt is not None:
+                name, fit = alt
+                for t in outliers:
+                    dropped[t.name] = math.nan
+                steps.append(Step(steps[-1].fit if steps else fit, tests, name, (name,), snoop,
+                                  {t.name: math.nan for t in outliers}))
+                outliers = []
+                named.append(name)
+                groups.append((name,))
+            continue
         if fit.p_value >= alpha:
             steps.append(Step(fit, tests, None, (), snoop))
             break
@@ -460,10 +489,70 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
                 named.remove(name)
             dropped[name] = p
         steps.append(Step(tested, tests, win.name, group, snoop, gone))
+    swaps: list[tuple[str, str, float, float]] = []
+    if len(named) >= 2:
+        others = [t.name for t in steps[-1].tests
+                  if t.status == "testable" and t.name not in dropped]
+        fit, swaps = _swap(full, fit, named, others, fixed)
+        for out, into, *_ in swaps:
+            i = named.index(out)
+            named[i], groups[i] = into, (into,)
     final = steps[-1]
     absorbed_list = [t.name for t in final.tests if t.status == "absorbed"]
     return Diagnosis(problem, alpha, before, fit, steps, named, groups, absorbed_list,
-                     outliers, dropped)
+                     outliers, dropped, swaps)
+
+
+def _effect_for_outliers(problem: Problem, fit: LeastSquaresFit, flagged: Sequence[str],
+                         others: Sequence[str], fixed: set[str]
+                         ) -> tuple[str, LeastSquaresFit] | None:
+    """The candidate that, fitted instead of all the flagged observations' shifts, gives the
+    lowest Akaike criterion ``chi2 + 2 p``, if lower than the model with the shifts (a
+    systematic effect seen first at the observations where it is largest); else None."""
+    kept = [e for e in fit.effects[1:] if e not in flagged]
+    best: tuple[float, str, LeastSquaresFit] | None = None
+    for name in others:
+        try:
+            alt = _fit_with_fixed(problem, [*kept, name], fit.params, fixed)
+        except (FitError, np.linalg.LinAlgError):
+            continue
+        score = alt.chi2 + 2.0 * len(alt.names)
+        if score < fit.chi2 + 2.0 * len(fit.names) and (best is None or score < best[0]):
+            best = (score, name, alt)
+    return None if best is None else (best[1], best[2])
+
+
+def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
+          others: Sequence[str], fixed: set[str]
+          ) -> tuple[LeastSquaresFit, list[tuple[str, str, float, float]]]:
+    """Replace named effects by other candidates while that lowers Akaike's criterion
+    ``chi2 + 2 p`` (the models compared are not nested; the step-wise additions can pick an
+    effect that stands in for another when several are present). Returns the final fit and
+    the swaps made."""
+    swaps: list[tuple[str, str, float, float]] = []
+    named, others = list(named), list(others)
+
+    def aic(f: LeastSquaresFit) -> float:
+        return f.chi2 + 2.0 * len(f.names)
+
+    while True:
+        best: tuple[float, str, str, LeastSquaresFit] | None = None
+        for out in named:
+            for into in others:
+                model = [into if e == out else e for e in fit.effects[1:]]
+                try:
+                    alt = _fit_with_fixed(problem, model, fit.params, fixed)
+                except (FitError, np.linalg.LinAlgError):  # not separable: no candidate
+                    continue
+                if aic(alt) < aic(fit) and (best is None or aic(alt) < best[0]):
+                    best = (aic(alt), out, into, alt)
+        if best is None:
+            return fit, swaps
+        _, out, into, alt = best
+        swaps.append((out, into, aic(fit), aic(alt)))
+        named[named.index(out)] = into
+        others[others.index(into)] = out
+        fit = alt
 
 
 def wald_test(fit: LeastSquaresFit, parameters: Sequence[str]) -> tuple[float, int, float]:

@@ -123,12 +123,12 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
     named = []
     for name in d.named:
         r = d.effect_result(name)
-        step = next(s for s in d.steps if s.winner == name)
-        test = next(t for t in step.tests if t.name == name)
+        step = next((s for s in d.steps if s.winner == name), None)
+        test = None if step is None else next(t for t in step.tests if t.name == name)
         named.append({**r, "parameters": _show(view, r["parameters"]),
                       "stderr": _show(view, r["stderr"]),
                       "units": {k: view.display_unit(k)[0] for k in r["parameters"]},
-                      "absorbed_parameters": test.absorbed_by})
+                      "absorbed_parameters": {} if test is None else test.absorbed_by})
 
     def candidate(t: CandidateTest) -> dict[str, Any]:
         return {"name": t.name, "status": t.status, "statistic": t.statistic, "dof": t.dof,
@@ -150,6 +150,8 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "absorbed": d.absorbed,
         "outliers": _outliers(d, view),
         "dropped_effects": [{"name": n, "p_value": p} for n, p in d.dropped.items()],
+        "swapped_effects": [{"out": o, "in": i, "aic_before": a, "aic_after": b}
+                            for o, i, a, b in d.swaps],
         "largest_residuals": largest_residuals(d, view),
         "gap": {"before": _gap(view, d.before), "after": _gap(view, d.after)},
         "rms_unit": view.rms_unit,
@@ -197,6 +199,9 @@ def format_text(report: Mapping[str, Any]) -> str:
                      f"{o['size_unit']} off the model ({o['size_sigma']:.1f} sigma; MDB "
                      f"{o['mdb_sigma']:.1f} sigma), p = {_p(o['p_value'])} (Holm); left out "
                      "of the fit")
+    for e in report.get("swapped_effects", []):
+        lines.append(f"swapped: {e['in']} fits better than {e['out']} with the others "
+                     f"(AIC {e['aic_before']:.1f} -> {e['aic_after']:.1f})")
     for e in report["dropped_effects"]:
         lines.append(f"dropped: {e['name']} (named earlier, not significant given the "
                      f"others: p = {_p(e['p_value'])}, Holm)")
