@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from .collimation_procedure import (
@@ -69,6 +70,22 @@ def test_pointing_satisfies_the_autocollimation_equation_and_the_roll(seed):
     np.testing.assert_allclose(c @ u, v, rtol=0.0, atol=1e-12)
     assert euler_readings(c)[2] == pytest.approx(roll, abs=1e-12)
     assert abs(euler_readings(c)[1]) < np.pi / 2
+
+
+def test_pointing_agrees_with_a_numerical_solution():
+    """Least squares over heading and pitch at the given roll, started from the normal's angles."""
+    rng = np.random.default_rng(21)
+    u = direction(400 * ARCSEC, -300 * ARCSEC)
+    for _ in range(5):
+        az, el, roll = rng.uniform(-np.pi, np.pi), rng.uniform(-1.0, 1.0), rng.normal(0, DEG)
+        v = direction(az, el)
+
+        def miss(x, v=v, roll=roll):
+            return Rotation.from_euler("ZXY", [-x[0], x[1], roll]).apply(u) - v
+
+        fit = least_squares(miss, [az, el], xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        expected = Rotation.from_euler("ZXY", [-fit.x[0], fit.x[1], roll]).as_matrix()
+        np.testing.assert_allclose(point_ins(u, v, roll), expected, atol=1e-10)
 
 
 def test_pointing_refuses_an_unreachable_normal():
@@ -183,8 +200,10 @@ def test_positive_lam_turns_the_optical_axis_up():
     y_R = (0, cos lam, -s) and x_R = (1, -s^2, -s cos lam)/sqrt(1 + s^2); a pitch mirror at
     elevation b is autocollimated with the INS axis d = direction(0, b - lam), so it reads heading
     atan2(x_R.d, y_R.d) = atan2(-s sin b / sqrt(1 + s^2), cos b) (to the left) and pitch
-    asin(sin b / sqrt(1 + s^2)). The centre pointing, relative to R, has roll -atan(s): the
-    reference's x axis is the INS axis at the roll mirror, pitched down by lam."""
+    asin(sin b / sqrt(1 + s^2)). With z_R = (s, s, cos lam)/sqrt(1 + s^2), a horizontal mirror at
+    azimuth a (INS axis direction(a, -lam)) reads pitch
+    asin(s cos lam (sin a + cos a - 1)/sqrt(1 + s^2)). The centre pointing, relative to R, has
+    roll -atan(s): the reference's x axis is the INS axis at the roll mirror, pitched down."""
     lam = 600.0
     args = {"rng": np.random.default_rng(7), "heading_of_theodolite_zero_deg": 0.0, **NOISE_FREE}
     absolute = rows(simulate_procedure(paper_like_layout(), 0.0, lam, **args))
@@ -200,6 +219,11 @@ def test_positive_lam_turns_the_optical_axis_up():
     assert relative["P5"]["ins_az_deg"] == pytest.approx(np.rad2deg(heading), abs=TOL_DEG)
     assert relative["P5"]["ins_el_deg"] == pytest.approx(np.rad2deg(pitch), abs=TOL_DEG)
     assert relative["P5"]["ins_az_deg"] * 3600 == pytest.approx(-lam * np.tan(b), rel=1e-3)
+    for m, a in zip(["A1", "A2", "A3", "A4", "A5"], np.deg2rad([-30, -15, 15, 30, 45]),
+                    strict=True):
+        pitch = np.arcsin(s * np.cos(lam * ARCSEC) * (np.sin(a) + np.cos(a) - 1)
+                          / np.sqrt(1 + s**2))
+        assert relative[m]["ins_el_deg"] == pytest.approx(np.rad2deg(pitch), abs=TOL_DEG)
 
 
 def test_reading_noise_has_the_requested_spread():
