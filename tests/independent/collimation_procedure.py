@@ -58,16 +58,16 @@ def euler_readings(c: np.ndarray) -> np.ndarray:
 def point_ins(u: np.ndarray, v: np.ndarray, roll: float) -> np.ndarray:
     """Attitude C with ``C u = v`` and absolute roll ``roll`` [rad] (autocollimation, sec. 3.2).
 
-    With ``w = R_y(roll) u`` the pitch solves ``(R_x(pitch) w)_z = v_z`` (upright branch) and the
-    heading turns the horizontal part of ``R_x(pitch) w`` onto that of ``v``.
+    With ``w = R_y(roll) u`` the pitch solves ``(R_x(pitch) w)_z = v_z`` (the upright solution)
+    and the heading turns the horizontal part of ``R_x(pitch) w`` onto that of ``v``.
     """
     w = Rotation.from_euler("Y", roll).apply(u)
     radius, alpha = np.hypot(w[1], w[2]), np.arctan2(w[2], w[1])
     if abs(v[2]) > radius:
         raise ValueError(f"no attitude with roll {roll / DEG:.3f} deg points the axis at {v}")
     base = np.arcsin(v[2] / radius)
-    branches = np.angle(np.exp(1j * (np.array([base, np.pi - base]) - alpha)))
-    pitch = branches[np.argmin(np.abs(branches))]
+    candidates = np.angle(np.exp(1j * (np.array([base, np.pi - base]) - alpha)))
+    pitch = candidates[np.argmin(np.abs(candidates))]
     p = Rotation.from_euler("X", pitch).apply(w)
     heading = np.arctan2(v[0], v[1]) - np.arctan2(p[0], p[1])
     c = attitude(heading, pitch, roll)
