@@ -178,7 +178,7 @@ def simulate_recording(*, delta_g_arcmin, delta_p_arcmin, mount: str, gyro_sampl
                        target_offset_px=(0.0, 0.0), duration_s: float = 60.0,
                        rate_hz: float = 100.0, fov_deg=(4.0, 3.0), pixels=(1280, 960),
                        aim_deg=(10.0, 15.0), gyro_bias_deg_h=(2.0, -1.5, 3.0),
-                       gyro_arw_deg_rth: float = 0.02, image_noise_px: float = 0.3,
+                       gyro_arw: float = 0.02, image_noise_px: float = 0.3,
                        encoder_lsb_rad: float | None = 2.0 * np.pi / 2**20,
                        rocking_deg: Rocking = DEFAULT_ROCKING,
                        rng: np.random.Generator | None = None) -> Recording:
@@ -189,7 +189,7 @@ def simulate_recording(*, delta_g_arcmin, delta_p_arcmin, mount: str, gyro_sampl
     delta_g_arcmin, delta_p_arcmin : IMU (δgx, δgy, δgz) and camera (δpx, δpy, δpz) installation
         angles [arcmin]. target_offset_px : image (x0, z0) of the target at t = 0 [px].
     aim_deg : initial gimbal azimuth η and pitch ε [deg]. gyro_bias_deg_h : constant bias per IMU
-        axis [deg/h]. gyro_arw_deg_rth : angle random walk [deg/√h]. encoder_lsb_rad : encoder step
+        axis [deg/h]. gyro_arw : angle random walk [deg/√h]. encoder_lsb_rad : encoder step
         [rad] (None: exact). rocking_deg : see ``DEFAULT_ROCKING``.
     """
     if mount not in MOUNTS or gyro_sampling not in SAMPLINGS:
@@ -207,7 +207,7 @@ def simulate_recording(*, delta_g_arcmin, delta_p_arcmin, mount: str, gyro_sampl
     c_bg = rot("y", delta_g[1]) @ rot("x", delta_g[0]) @ rot("z", delta_g[2])
     w_b = rate(t) if gyro_sampling == "point" else interval_mean(rate, t, h)
     gyro = (w_b @ c_bg.T + np.asarray(gyro_bias_deg_h, float) * DEG_PER_H
-            + rng.standard_normal((n, 3)) * gyro_arw_deg_rth * DEG_PER_SQRT_H / math.sqrt(h))
+            + rng.standard_normal((n, 3)) * gyro_arw * DEG_PER_SQRT_H / math.sqrt(h))
     w_loop = gyro if gyro_sampling == "interval-mean" else point_to_interval(gyro)
     eta, eps = gimbal_loop(w_loop, h, *np.radians(aim_deg))
     if np.max(np.abs(eps)) > MAX_PITCH:
@@ -237,15 +237,23 @@ def write_csv(path: str | Path, recording: Recording) -> None:
         with os.fdopen(fd, "w") as out:
             out.write(",".join(CSV_COLUMNS) + "\n")
             np.savetxt(out, recording.columns(), fmt="%.17g", delimiter=",")
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
+class _Parser(argparse.ArgumentParser):
+    """Bad flags: one line and exit code 2, without the usage text."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: write one simulated run as CSV; the truth goes to standard output."""
-    p = argparse.ArgumentParser(prog="python -m tests.independent.stabilization_recording",
+    p = _Parser(prog="python -m tests.independent.stabilization_recording",
                                 description="Simulate a seed 001 recording (CSV).")
     p.add_argument("out", type=Path)
     p.add_argument("--seed", type=int, default=0)
@@ -257,6 +265,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--aim-deg", type=float, nargs=2, default=(10.0, 15.0))
     p.add_argument("--duration-s", type=float, default=60.0)
     p.add_argument("--rate-hz", type=float, default=100.0)
+    p.add_argument("--gyro-bias-deg-h", type=float, nargs=3, default=(2.0, -1.5, 3.0))
+    p.add_argument("--gyro-arw", type=float, default=0.02, help="angle random walk [deg/√h]")
     p.add_argument("--image-noise-px", type=float, default=0.3)
     a = p.parse_args(argv)
     try:
@@ -264,6 +274,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             delta_g_arcmin=a.delta_g_arcmin, delta_p_arcmin=a.delta_p_arcmin, mount=a.mount,
             gyro_sampling=a.gyro_sampling, target_offset_px=a.target_offset_px,
             duration_s=a.duration_s, rate_hz=a.rate_hz, aim_deg=a.aim_deg,
+            gyro_bias_deg_h=a.gyro_bias_deg_h, gyro_arw=a.gyro_arw,
             image_noise_px=a.image_noise_px, rng=np.random.default_rng(a.seed))
         write_csv(a.out, rec)
     except ValueError as exc:

@@ -22,7 +22,7 @@ from .stabilization_recording import (
     write_csv,
 )
 
-QUIET = {"gyro_bias_deg_h": (0.0, 0.0, 0.0), "gyro_arw_deg_rth": 0.0, "image_noise_px": 0.0,
+QUIET = {"gyro_bias_deg_h": (0.0, 0.0, 0.0), "gyro_arw": 0.0, "image_noise_px": 0.0,
          "encoder_lsb_rad": None}
 K = np.array([1280, 960]) / (2.0 * np.tan(np.radians([4.0, 3.0]) / 2.0))
 """Focal lengths [px/rad] of the default camera."""
@@ -113,7 +113,7 @@ def test_mounts_coincide_while_the_gimbal_pitch_stays_zero():
     yaw_only = ((), (), ((2.0, 0.11, 1.2), (0.8, 0.61, 0.0)))
     common = {"delta_g_arcmin": (0, 0, 7.0), "delta_p_arcmin": (5.0, -3.0, 9.0),
               "gyro_sampling": "interval-mean", "aim_deg": (20.0, 0.0), "duration_s": 20.0,
-              "gyro_bias_deg_h": (0.0, 0.0, 40.0), "gyro_arw_deg_rth": 0.0,
+              "gyro_bias_deg_h": (0.0, 0.0, 40.0), "gyro_arw": 0.0,
               "image_noise_px": 0.3, "rocking_deg": yaw_only}
     patent, inner = (simulate_recording(mount=m, rng=np.random.default_rng(5), **common)
                      for m in ("patent", "inner-gimbal"))
@@ -194,8 +194,8 @@ def test_noise_has_its_stated_size():
     kw = {"delta_g_arcmin": (0, 0, 0), "delta_p_arcmin": (0, 0, 0), "mount": "patent",
           "gyro_sampling": "point", "duration_s": 20.0, "encoder_lsb_rad": None,
           "gyro_bias_deg_h": (0.0, 0.0, 0.0)}
-    clean = simulate_recording(**{**kw, "gyro_arw_deg_rth": 0.0, "image_noise_px": 0.0})
-    noisy = simulate_recording(**{**kw, "gyro_arw_deg_rth": 0.05, "image_noise_px": 0.4},
+    clean = simulate_recording(**{**kw, "gyro_arw": 0.0, "image_noise_px": 0.0})
+    noisy = simulate_recording(**{**kw, "gyro_arw": 0.05, "image_noise_px": 0.4},
                                rng=np.random.default_rng(11))
     gyro_noise = (noisy.gyro - clean.gyro) / (0.05 * DEG_PER_SQRT_H / np.sqrt(0.01))
     image_noise = (noisy.los_px - noisy.los_true_px) / 0.4
@@ -239,3 +239,8 @@ def test_cli_writes_a_run_and_refuses_an_impossible_one(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "gimbal pitch" in err
     assert not bad.exists()
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(bad), "--mount", "turret"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'turret'" in err
