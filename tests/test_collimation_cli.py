@@ -24,9 +24,11 @@ def run_cli(*args):
 def test_simulate_then_fit_recovers_the_injected_offsets(tmp_path):
     data, out = tmp_path / "cal.csv", tmp_path / "fit.json"
     sim = run_cli("simulate", str(data), "--seed", "7", "--axis-az-arcsec", "300",
-                  "--axis-el-arcsec", "-120", "--with-roll", "--mount-roll-sigma-deg", "0.5")
+                  "--axis-el-arcsec", "-120", "--with-roll", "--mount-roll-sigma-deg", "0.5",
+                  "--readings", "absolute")
     assert sim.returncode == 0, sim.stderr
-    fit = run_cli("fit", str(data), "--json", str(out), "--angle-sigma-arcsec", "2.83")
+    fit = run_cli("fit", str(data), "--json", str(out), "--angle-sigma-arcsec", "2.83",
+                  "--readings", "absolute")
     assert fit.returncode == 0, fit.stderr
     assert "axis_az" in fit.stdout and "RMS of all residuals" in fit.stdout
     report = json.loads(out.read_text())
@@ -67,7 +69,8 @@ def test_malformed_data_exit_2_with_one_line(tmp_path, capsys, case):
     text, needle = MALFORMED[case]
     data, out = tmp_path / "bad.csv", tmp_path / "fit.json"
     data.write_text(text)
-    assert main(["collimation", "fit", str(data), "--json", str(out)]) == 2
+    assert main(["collimation", "fit", str(data), "--json", str(out),
+                 "--readings", "absolute"]) == 2
     captured = capsys.readouterr()
     assert captured.err.count("\n") == 1, captured.err
     assert needle in captured.err and str(data) in captured.err

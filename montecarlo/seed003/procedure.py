@@ -10,11 +10,12 @@ The readings are modelled by :mod:`montecarlo.seed003.reference`. Two kinds of d
   (``reference_az``). Parameters: gamma, lambda, ``reference_az``.
 
 Rolls: recorded (absolute with reference rows, relative without; the INS's absolute roll at the
-reference pointings is then taken as 0), assumed zero (level mount), or fitted (``free_roll``:
-one absolute roll per pointing, reference pointings included, each with the prior
-``N(0, roll_sigma)``). With free rolls only the INS axis directions are observed, and these
-depend on the offsets only through their size ``angle(u, e_y)``: the direction of the offset in
-the (gamma, lambda) plane is fixed by the prior on the rolls alone (docs/collimation.md).
+reference pointings is then fitted with the prior ``N(0, roll_sigma)``), assumed zero (level
+mount), or fitted (``free_roll``: one absolute roll per pointing, reference pointings included,
+each with the prior ``N(0, roll_sigma)``). With free rolls only the INS axis directions are
+observed, and these depend on the offsets only through their size ``angle(u, e_y)``: the
+direction of the offset in the (gamma, lambda) plane is fixed by the prior on the rolls alone
+(docs/collimation.md).
 
 The fit is generalised least squares: the residual covariance is propagated from the reading
 errors (INS ``sigma_ins`` per heading, pitch and roll read; theodolite ``sigma_theodolite`` per
@@ -52,6 +53,10 @@ CLAIM = 15.0 * ARCSEC
 
 _STEP = 1e-6
 """Central-difference step [rad] for the Jacobians."""
+
+_SEPARABLE = 1e-4
+"""Smallest accepted ratio of singular values of the column-normalised whitened Jacobian (as in
+:mod:`montecarlo.seed003.fit`): below it a parameter combination is not determined at all."""
 
 
 class NotDetermined(ValueError):
@@ -265,12 +270,35 @@ def _solve(model: _Model, x0: FloatArray, free: NDArray[np.intp], sigma_ins: flo
                             gtol=1e-15)
         x[free] = sol.x
     J = jac(x[free])
+    norms = np.linalg.norm(J, axis=0)
+    singular = np.linalg.svd(J / np.where(norms > 0, norms, 1.0), compute_uv=False)
     try:
+        if norms.min() == 0.0 or singular[-1] < _SEPARABLE * singular[0]:
+            raise LinAlgError
         cov = cho_solve(cho_factor(J.T @ J), np.eye(free.size))
     except LinAlgError:
-        raise NotDetermined("the mirrors do not determine all parameters (gamma needs pitch "
-                            "mirrors; lambda needs azimuth mirrors)") from None
+        raise NotDetermined("the mirrors do not determine all parameters: not separable "
+                            "(gamma needs pitch mirrors, lambda azimuth mirrors)") from None
     return x, cov, whitened(x[free])
+
+
+def _fit_from_starts(model: _Model, free: NDArray[np.intp], sigma_ins: float,
+                     sigma_theodolite: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Solve; with fitted rolls start from the fit with rolls at 0 and from its mirror images
+    (gamma or lambda negated), and keep the smallest chi-square: the rolls turn the offset about
+    the INS axis, so the cost has local minima in the offset's direction."""
+    x0 = _start(model)
+    if not model.n_prior:
+        return _solve(model, x0, free, sigma_ins, sigma_theodolite)
+    level, _, _ = _solve(model, x0, np.arange(model.n_core), sigma_ins, sigma_theodolite)
+    best = None
+    for flip in ((1.0, 1.0), (-1.0, 1.0), (1.0, -1.0)):
+        start = level.copy()
+        start[:2] *= flip
+        got = _solve(model, start, free, sigma_ins, sigma_theodolite)
+        if best is None or got[2] @ got[2] < best[2] @ best[2]:
+            best = got
+    return best
 
 
 def fit_procedure(data: ProcedureData, *, side: float = 1.0, free_roll: bool = False,
@@ -317,7 +345,7 @@ def fit_procedure(data: ProcedureData, *, side: float = 1.0, free_roll: bool = F
     s_ins = ARCSEC if not given else float(sigma_ins or 0.0)
     s_theo = ARCSEC if not given else float(sigma_theodolite or 0.0)
     free = np.arange(p)
-    x, cov, w = _solve(model, _start(model), free, s_ins, s_theo)
+    x, cov, w = _fit_from_starts(model, free, s_ins, s_theo)
     if not given:  # a posteriori: one scale for both; the prior is not scaled
         scale = math.sqrt(float(np.sum(w[:2 * model.m] ** 2)) / max(dof, 1))
         s_ins, s_theo = s_ins * scale, s_theo * scale
@@ -412,3 +440,125 @@ def simulate_procedure(axis_az: float, axis_el: float, az: ArrayLike, el: ArrayL
         ins_el=pitch + noise.ins_pitch * rng.standard_normal(k),
         ins_roll=roll + noise.ins_roll * rng.standard_normal(k) if with_roll else None,
         center=0 if reference_rows else None, roll_mirror=1 if reference_rows else None)
+
+
+# --------------------------------------------------------------------------- report quantities
+
+
+def _reference_pointings(data: ProcedureData, fit: ProcedureFit):
+    """Theodolite (az, el) and absolute roll of the central and the roll reference pointing."""
+    p = fit.params
+    if data.has_reference:
+        c, r = data.center, data.roll_mirror
+        return ((data.theodolite_az[c], data.theodolite_el[c], fit.rolls[c]),
+                (data.theodolite_az[r], data.theodolite_el[r], fit.rolls[r]))
+    m = data.measured.size
+    az_c = p["reference_az"]
+    return ((az_c, 0.0, fit.rolls[m]),
+            (float(ref.roll_mirror_azimuth(az_c, fit.side)), 0.0, fit.rolls[m + 1]))
+
+
+def corrected_and_theodolite(data: ProcedureData, fit: ProcedureFit
+                             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Corrected INS readings and the theodolite's relative angles at the measured mirrors [rad].
+
+    The relative attitude at each measured mirror comes from the readings (relative heading and
+    pitch; the roll recorded, or, when assumed or fitted, the model's relative roll at the fitted
+    parameters); at the reference mirrors from the readings (reference rows) or the model. The
+    corrected reading is :func:`montecarlo.seed003.reference.corrected_readings`; the theodolite
+    value :func:`montecarlo.seed003.reference.theodolite_relative`.
+
+    Returns
+    -------
+    corrected_az, corrected_el, theodolite_az, theodolite_el, relative_roll : ndarray (m,)
+    """
+    k, side = data.measured, fit.side
+    gamma, lam = fit.params["axis_az"], fit.params["axis_el"]
+    center, mirror = _reference_pointings(data, fit)
+    if data.has_reference:
+        c, r = data.center, data.roll_mirror
+        h, p, roll = ref.relative_from_absolute(
+            data.ins_az, data.ins_el, fit.rolls,
+            (data.ins_az[c], data.ins_el[c], fit.rolls[c]),
+            (data.ins_az[r], data.ins_el[r], fit.rolls[r]), side)
+        rel_c, rel_r = (h[c], p[c], roll[c]), (h[r], p[r], roll[r])
+        h, p, roll = h[k], p[k], roll[k]
+    else:
+        C_c = ref.attitude_at(gamma, lam, *center)
+        C_r = ref.attitude_at(gamma, lam, *mirror)
+        C_R = ref.reference_frame(C_c, C_r, side)
+        rel_c, rel_r = attitude_angles(C_R.T @ C_c), attitude_angles(C_R.T @ C_r)
+        h, p = data.ins_az, data.ins_el
+        if fit.roll_source.startswith("recorded"):
+            roll = data.ins_roll
+        else:
+            m = k.size
+            C_k = ref.attitude_at(gamma, lam, data.theodolite_az, data.theodolite_el,
+                                  fit.rolls[:m])
+            roll = attitude_angles(C_R.T @ C_k)[2]
+    az, el = ref.corrected_readings(h, p, roll, gamma, lam, rel_c, rel_r, side)
+    t_az, t_el = ref.theodolite_relative(data.theodolite_az[k], data.theodolite_el[k],
+                                         center[:2], mirror[:2], side)
+    return az, el, t_az, t_el, roll
+
+
+def heading_floor(data: ProcedureData, fit: ProcedureFit) -> float:
+    """RMS shift of the relative headings per radian of unrecorded roll at every pointing [rad/rad].
+
+    ``sqrt(mean_k sum_j (d heading_k / d phi_j)^2)`` at the fitted offsets, all pointings'
+    absolute rolls independent: the scatter a level-mount assumption leaves when the mount rolls
+    by 1 rad (1 sigma); it scales with lambda (and gamma).
+    """
+    model = _Model(data, fit.side, True, 1.0)
+    x = np.zeros(len(model.names))
+    x[:model.n_core] = fit.values[:model.n_core]
+    J = model.jacobian_x(x, model.z0, np.arange(model.n_core, x.size))[:model.m]
+    return float(np.sqrt(np.mean(np.sum(J**2, axis=1))))
+
+
+def predicted_stderr(data: ProcedureData, fit: ProcedureFit, free_roll: bool,
+                     roll_sigma: float) -> dict[str, float]:
+    """1-sigma of the parameters for ``data``'s layout at the fitted values [rad], noise-free.
+
+    The same generalised least-squares covariance as :func:`fit_procedure`, evaluated on
+    readings simulated without error (:func:`simulate_procedure`) with ``fit``'s sigmas.
+    """
+    model = _Model(data, fit.side, free_roll, roll_sigma)
+    x = np.zeros(len(model.names))
+    x[:model.n_core] = fit.values[:model.n_core]
+    L = np.linalg.cholesky(model.residual_covariance(x, fit.sigma_ins, fit.sigma_theodolite))
+    J = solve_triangular(L, model.jacobian_x(x, model.z0, np.arange(x.size)), lower=True)
+    J = np.vstack([J, np.hstack([np.zeros((model.n_prior, model.n_core)),
+                                 np.eye(model.n_prior) / roll_sigma])])
+    cov = np.linalg.pinv(J.T @ J)
+    return dict(zip(model.names, np.sqrt(np.diag(cov)).tolist(), strict=True))
+
+
+def pitch_reach(data: ProcedureData, fit: ProcedureFit, pitch: ArrayLike, free_roll: bool,
+                roll_sigma: float, target: float = CLAIM / 2,
+                highest: float = math.radians(85.0)) -> float | None:
+    """Smallest top elevation of the pitch mirrors for which sigma_gamma <= ``target`` [rad].
+
+    The pitch mirrors (``pitch``: mask over the measured mirrors) keep their azimuths and their
+    elevations scaled to reach the candidate top elevation (1 deg steps up to ``highest``); the
+    readings are simulated without error at the fitted offsets (:func:`predicted_stderr`).
+    None when no pitch mirror or no elevation up to ``highest`` suffices.
+    """
+    pitch = np.asarray(pitch, bool)
+    k = data.measured
+    el = data.theodolite_el[k]
+    if not pitch.any() or np.max(np.abs(el[pitch])) <= 0:
+        return None
+    top = float(np.max(np.abs(el[pitch])))
+    center, _ = _reference_pointings(data, fit)
+    for reach in np.arange(math.ceil(math.degrees(top)), math.degrees(highest) + 0.5):
+        new_el = np.where(pitch, el * math.radians(reach) / top, el)
+        sim = simulate_procedure(fit.params["axis_az"], fit.params["axis_el"],
+                                 data.theodolite_az[k], new_el, Noise(0, 0, 0, 0, 0), 0,
+                                 side=fit.side, az_center=float(center[0]),
+                                 reference_rows=data.has_reference,
+                                 with_roll=data.ins_roll is not None)
+        se = predicted_stderr(sim, fit, free_roll, roll_sigma)
+        if se["axis_az"] <= target:
+            return math.radians(reach)
+    return None
