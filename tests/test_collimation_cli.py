@@ -96,7 +96,7 @@ def test_bad_flag_exits_2(tmp_path, capsys):
 def test_figures_command_writes_pngs_and_reports_the_disagreement(tmp_path, capsys):
     assert main(["collimation", "figures", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == [*(f"fig{i}.png" for i in (3, 4, 5, 6)), "provenance.json"]
+    assert names == [*(f"fig{i}.png" for i in (3, 4, 5, 6)), "procedure.png", "provenance.json"]
     for name in names[:-1]:
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "at β = 60°, Δβ is almost equal to γ: Δβ(60°) / γ = 0.001512 -> DOES NOT HOLD" \

@@ -196,13 +196,13 @@ def _simulate_reference(args: argparse.Namespace) -> int:
 
 def _cmd_collimation_figures(args: argparse.Namespace) -> int:
     from montecarlo.io.files import save_figure
-    from montecarlo.seed003.figures import pair_figures, paper_statements
+    from montecarlo.seed003.figures import pair_figures, paper_statements, procedure_figure
 
     with OutputDir(args.outdir, "collimation figures") as staging:
-        for name, fig in pair_figures().items():
+        for name, fig in {**pair_figures(), "procedure": procedure_figure()}.items():
             save_figure(fig, staging / f"{name}.png")
         write_provenance(staging, "collimation figures")
-    print(f"wrote {args.outdir}/fig3.png ... fig6.png")
+    print(f"wrote {args.outdir}/fig3.png ... fig6.png, procedure.png")
     print("seed 003, section 2 statements, evaluated with offsets of 0.1° (level mount):")
     for row in paper_statements():
         verdict = "holds" if row["holds"] else "DOES NOT HOLD"

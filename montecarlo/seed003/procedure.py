@@ -562,3 +562,68 @@ def pitch_reach(data: ProcedureData, fit: ProcedureFit, pitch: ArrayLike, free_r
         if se["axis_az"] <= target:
             return math.radians(reach)
     return None
+
+
+# --------------------------------------------------------------------------- acceptance
+
+
+def acceptance_trials(n: int, rng: np.random.Generator, az: ArrayLike, el: ArrayLike, *,
+                      side: float = 1.0, reference_rows: bool = True, roll: str = "recorded",
+                      mount_roll: float = math.radians(1.0), noise_sigma: float = 2.0 * ARCSEC,
+                      offsets: tuple[float, float] = (10.0 * ARCSEC, 600.0 * ARCSEC),
+                      roll_sigma: float = math.radians(2.0)) -> dict[str, FloatArray]:
+    """Monte Carlo of simulate -> fit by the procedure: how often the offsets lie within 2 sigma.
+
+    Each trial draws gamma and lambda uniformly in ``offsets`` with random signs, a frame heading
+    in [-pi, pi), simulates (:func:`simulate_procedure`, theodolite and INS errors
+    ``noise_sigma``) and fits with the known sigmas (:func:`fit_procedure`). ``roll``:
+    ``"recorded"`` (mount rolls ``N(0, mount_roll)``, roll column written), ``"level"`` (level
+    mount, no roll column) or ``"free"`` (mount rolls, no roll column, ``free_roll``).
+
+    Returns
+    -------
+    dict of ndarray (n,): ``axis_az_error``, ``axis_el_error`` [rad], ``axis_az_sigma``,
+    ``axis_el_sigma`` [rad], ``chi2_red`` [1].
+    """
+    noise = Noise(noise_sigma, noise_sigma, noise_sigma, noise_sigma,
+                  0.0 if roll == "level" else mount_roll)
+    out = {k: np.empty(n) for k in ("axis_az_error", "axis_el_error", "axis_az_sigma",
+                                    "axis_el_sigma", "chi2_red")}
+    for i in range(n):
+        truth = rng.uniform(*offsets, 2) * rng.choice([-1.0, 1.0], 2)
+        data = simulate_procedure(truth[0], truth[1], az, el, noise, rng, side=side,
+                                  frame_heading=rng.uniform(-math.pi, math.pi),
+                                  reference_rows=reference_rows, with_roll=roll == "recorded")
+        f = fit_procedure(data, side=side, free_roll=roll == "free", roll_sigma=roll_sigma,
+                          sigma_ins=noise_sigma, sigma_theodolite=noise_sigma, before=False)
+        se = f.stderr
+        for j, k in enumerate(("axis_az", "axis_el")):
+            out[f"{k}_error"][i] = f.params[k] - truth[j]
+            out[f"{k}_sigma"][i] = se[k]
+        out["chi2_red"][i] = f.chi2_red
+    return out
+
+
+ACCEPTANCE_CASES = {
+    f"{layout}, {rows}, {roll}, {side}": (layout, rows == "reference rows", roll,
+                                          1.0 if side == "right" else -1.0)
+    for layout in ("paper-like", "pitch to 60°")
+    for rows, roll, side in (("reference rows", "recorded", "right"),
+                             ("reference rows", "recorded", "left"),
+                             ("reference rows", "level", "right"),
+                             ("reference rows", "free", "right"),
+                             ("relative", "recorded", "right"),
+                             ("relative", "recorded", "left"),
+                             ("relative", "level", "right"),
+                             ("relative", "free", "left"))
+}
+"""Acceptance cases: name -> (layout, reference rows?, roll, side) (docs/collimation.md)."""
+
+
+def acceptance_case(name: str, n: int, seed: int) -> dict[str, FloatArray]:
+    """:func:`acceptance_trials` for one of :data:`ACCEPTANCE_CASES`."""
+    layout, rows, roll, side = ACCEPTANCE_CASES[name]
+    az, el, _ = procedure_layout(pitches=PAPER_PITCHES if layout == "paper-like"
+                                 else HIGH_PITCHES)
+    return acceptance_trials(n, np.random.default_rng(seed), az, el, side=side,
+                             reference_rows=rows, roll=roll)
