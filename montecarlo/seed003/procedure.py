@@ -249,14 +249,14 @@ def _solve(model: _Model, x0: FloatArray, free: NDArray[np.intp], sigma_ins: flo
     x = x0.copy()
     for _ in range(2):  # the residual covariance at the start, then at the first solution
         L = np.linalg.cholesky(model.residual_covariance(x, sigma_ins, sigma_theodolite))
+        W = solve_triangular(L, np.eye(L.shape[0]), lower=True)  # whitening, L^-1
 
-        def whitened(xf, L=L):
+        def whitened(xf, W=W):
             xx = x0.copy()
             xx[free] = xf
-            return np.concatenate([solve_triangular(L, model.residuals(xx, model.z0), lower=True),
-                                   model.prior(xx)])
+            return np.concatenate([W @ model.residuals(xx, model.z0), model.prior(xx)])
 
-        def jac(xf, L=L):
+        def jac(xf, W=W):
             xx = x0.copy()
             xx[free] = xf
             J = model.jacobian_x(xx, model.z0, free)
@@ -264,7 +264,7 @@ def _solve(model: _Model, x0: FloatArray, free: NDArray[np.intp], sigma_ins: flo
             for j, i in enumerate(free):
                 if i >= model.n_core:
                     Jp[i - model.n_core, j] = 1.0 / model.roll_sigma
-            return np.vstack([solve_triangular(L, J, lower=True), Jp])
+            return np.vstack([W @ J, Jp])
 
         sol = least_squares(whitened, x[free], jac=jac, method="lm", xtol=1e-15, ftol=1e-15,
                             gtol=1e-15)
