@@ -120,8 +120,19 @@ def _cmd_collimation_simulate(args: argparse.Namespace) -> int:
     from montecarlo.io.collimation_csv import MirrorData, write_mirror_csv
     from montecarlo.seed003.model import Noise, paper_layout, simulate_readings
 
+    layout = {"--n-azimuth": args.n_azimuth, "--n-pitch": args.n_pitch,
+              "--azimuth-span-deg": args.azimuth_span_deg,
+              "--pitch-span-deg": args.pitch_span_deg}
     if args.readings == "reference":
+        given = ", ".join(f"{k} {v:g}" for k, v in layout.items() if v is not None)
+        if given:
+            raise InputError(f"{given}: only with --readings absolute (the procedure's mirrors "
+                             "are --azimuths-deg and --pitch-elevations-deg)")
         return _simulate_reference(args)
+    for key, default in (("n_azimuth", 5), ("n_pitch", 5), ("azimuth_span_deg", 90.0),
+                         ("pitch_span_deg", 60.0)):
+        if getattr(args, key) is None:
+            setattr(args, key, default)
     if args.n_azimuth + args.n_pitch == 0:
         raise InputError("--n-azimuth, --n-pitch: no mirrors to simulate (both are 0)")
     writable_file(args.out)
@@ -245,10 +256,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--axis-az-arcsec", type=finite, default=180.0)
     p.add_argument("--axis-el-arcsec", type=finite, default=180.0)
     p.add_argument("--frame-heading-deg", type=finite, default=30.0)
-    p.add_argument("--n-azimuth", type=nonnegative_int, default=5)
-    p.add_argument("--n-pitch", type=nonnegative_int, default=5)
-    p.add_argument("--azimuth-span-deg", type=finite, default=90.0)
-    p.add_argument("--pitch-span-deg", type=finite, default=60.0)
+    p.add_argument("--n-azimuth", type=nonnegative_int, help="absolute readings (default 5)")
+    p.add_argument("--n-pitch", type=nonnegative_int, help="absolute readings (default 5)")
+    p.add_argument("--azimuth-span-deg", type=finite, help="absolute readings (default 90)")
+    p.add_argument("--pitch-span-deg", type=finite, help="absolute readings (default 60)")
     p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--ins-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--mount-roll-sigma-deg", type=nonnegative, default=0.0,
