@@ -169,3 +169,16 @@ def test_procedure_bad_input_exits_2_with_one_line(tmp_path, capsys, text, optio
     captured = capsys.readouterr()
     assert captured.err.count("\n") == 1 and needle in captured.err, captured.err
     assert not out.exists()
+
+
+def test_absolute_data_read_as_reference_readings_is_flagged(tmp_path, capsys):
+    """Absolute readings fitted as relative ones (the default) leave a misfit the report names."""
+    data = tmp_path / "abs.csv"
+    assert main(["collimation", "simulate", str(data), "--readings", "absolute", "--seed",
+                 "3"]) == 0
+    capsys.readouterr()
+    assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "2.83"]) == 0
+    assert "MISFIT" in capsys.readouterr().out
+    assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "2.83",
+                 "--readings", "absolute"]) == 0
+    assert "MISFIT" not in capsys.readouterr().out

@@ -381,6 +381,7 @@ def reference_report(readings: MirrorData, data: ProcedureData, result: Procedur
                      source: str, free_roll: bool, roll_sigma: float) -> dict[str, object]:
     """JSON-ready summary of a fit of the paper's procedure (arc-seconds unless named)."""
     import numpy as np
+    from scipy.stats import chi2
 
     from montecarlo.seed003.procedure import (
         CLAIM,
@@ -450,6 +451,8 @@ def reference_report(readings: MirrorData, data: ProcedureData, result: Procedur
                          "theodolite": result.sigma_theodolite / ARCSEC},
         "sigma_source": result.sigma_source,
         "chi2": result.chi2, "dof": result.dof, "chi2_red": result.chi2_red,
+        "chi2_p_value": float(chi2.sf(result.chi2, result.dof))
+        if result.sigma_source == "given" else None,
         "not_determined": not_determined,
         "heading_floor": floor,
         "mirrors": mirrors,
@@ -488,6 +491,10 @@ def format_reference_report(report: Mapping[str, object]) -> str:
                     f", γ-reference azimuth "
                     f"{corr['matrix'][i][corr['names'].index('reference_az')]:+.3f}"))
     lines.append(f"chi2/dof = {report['chi2']:.2f}/{report['dof']} = {report['chi2_red']:.3f}")
+    if report["chi2_p_value"] is not None and report["chi2_p_value"] < 1e-3:
+        lines.append(f"MISFIT: χ² p-value {report['chi2_p_value']:.1e} with the given sigmas; "
+                     "check the reading model (--readings absolute if the INS readings are "
+                     "absolute and the file has no reference rows), the roll and the sigmas")
     for item in report["not_determined"]:
         text = (f"NOT DETERMINED: {item['parameter']} (σ {item['stderr_arcsec']:.1f}″, 2σ above "
                 "15″) by this mirror layout")
