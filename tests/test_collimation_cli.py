@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from montecarlo.cli import main
@@ -24,9 +25,11 @@ def run_cli(*args):
 def test_simulate_then_fit_recovers_the_injected_offsets(tmp_path):
     data, out = tmp_path / "cal.csv", tmp_path / "fit.json"
     sim = run_cli("simulate", str(data), "--seed", "7", "--axis-az-arcsec", "300",
-                  "--axis-el-arcsec", "-120", "--with-roll", "--mount-roll-sigma-deg", "0.5")
+                  "--axis-el-arcsec", "-120", "--with-roll", "--mount-roll-sigma-deg", "0.5",
+                  "--readings", "absolute")
     assert sim.returncode == 0, sim.stderr
-    fit = run_cli("fit", str(data), "--json", str(out), "--angle-sigma-arcsec", "2.83")
+    fit = run_cli("fit", str(data), "--json", str(out), "--angle-sigma-arcsec", "2.83",
+                  "--readings", "absolute")
     assert fit.returncode == 0, fit.stderr
     assert "axis_az" in fit.stdout and "RMS of all residuals" in fit.stdout
     report = json.loads(out.read_text())
@@ -67,7 +70,8 @@ def test_malformed_data_exit_2_with_one_line(tmp_path, capsys, case):
     text, needle = MALFORMED[case]
     data, out = tmp_path / "bad.csv", tmp_path / "fit.json"
     data.write_text(text)
-    assert main(["collimation", "fit", str(data), "--json", str(out)]) == 2
+    assert main(["collimation", "fit", str(data), "--json", str(out),
+                 "--readings", "absolute"]) == 2
     captured = capsys.readouterr()
     assert captured.err.count("\n") == 1, captured.err
     assert needle in captured.err and str(data) in captured.err
@@ -92,8 +96,89 @@ def test_bad_flag_exits_2(tmp_path, capsys):
 def test_figures_command_writes_pngs_and_reports_the_disagreement(tmp_path, capsys):
     assert main(["collimation", "figures", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == [*(f"fig{i}.png" for i in (3, 4, 5, 6)), "provenance.json"]
+    assert names == [*(f"fig{i}.png" for i in (3, 4, 5, 6)), "procedure.png", "provenance.json"]
     for name in names[:-1]:
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "at β = 60°, Δβ is almost equal to γ: Δβ(60°) / γ = 0.001512 -> DOES NOT HOLD" \
         in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("options", "fit_options"), [
+    ((), ()),
+    (("--roll-mirror", "left", "--with-roll"), ("--roll-mirror", "left")),
+    (("--no-reference-rows", "--with-roll"), ()),
+    (("--no-reference-rows",), ("--free-roll",)),
+])
+def test_procedure_simulate_then_fit(tmp_path, capsys, options, fit_options):
+    """The paper's procedure (default --readings reference) on the pitch-to-60° layout."""
+    data, out = tmp_path / "cal.csv", tmp_path / "fit.json"
+    assert main(["collimation", "simulate", str(data), "--seed", "5", "--axis-az-arcsec", "250",
+                 "--axis-el-arcsec", "-150", "--mount-roll-sigma-deg", "1",
+                 "--pitch-elevations-deg", "12,24,36,48,60", *options]) == 0
+    has_rows = "--no-reference-rows" not in options
+    assert ("reference_center" in data.read_text()) == has_rows
+    assert main(["collimation", "fit", str(data), "--json", str(out),
+                 "--angle-sigma-arcsec", "2.83", *fit_options]) == 0
+    r = json.loads(out.read_text())
+    for name, truth in (("axis_az", 250.0), ("axis_el", -150.0)):
+        # 4 sigma: this single seeded data set must not fail by chance (p < 1e-4)
+        assert abs(r["parameters"][name] - truth) < 4 * r["stderr"][name]
+    assert r["readings"] == "reference" and len(r["mirrors"]) == 10
+    assert ("reference_az" in r["parameters"]) != has_rows
+    assert r["rms_arcsec"]["after"]["all"] < r["rms_arcsec"]["before"]["all"]
+    assert set(r["mirrors"][0]) >= {"corrected_ins_az_deg", "corrected_ins_el_deg",
+                                    "deviation_az_arcsec", "verdict"}
+    corr = np.array(r["correlation"]["matrix"])
+    np.testing.assert_allclose(np.diag(corr), 1.0, atol=1e-12)
+    # the corrected readings agree with the theodolite's within the propagated noise
+    dev = [max(abs(m["deviation_az_arcsec"]), abs(m["deviation_el_arcsec"])) for m in r["mirrors"]]
+    assert max(dev) < 30.0 and r["claim_15_arcsec"]["max_deviation_arcsec"] == max(dev)
+
+
+def test_procedure_report_flags_gamma_and_the_level_mount_floor(tmp_path, capsys):
+    data = tmp_path / "cal.csv"
+    assert main(["collimation", "simulate", str(data), "--seed", "2", "--axis-el-arcsec",
+                 "400"]) == 0
+    capsys.readouterr()
+    assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "2.83"]) == 0
+    text = capsys.readouterr().out
+    assert "NOT DETERMINED: axis_az" in text and "pitch mirrors must reach about" in text
+    assert "INS roll not recorded: a level mount is assumed" in text
+    assert "the paper's 15″ claim" in text
+
+
+REFERENCE_ROWS = """C,reference_center,0.0,0.0,30.0,0.0
+R,reference_roll,90.0,0.0,120.0,0.0
+"""
+
+
+@pytest.mark.parametrize(("text", "options", "needle"), [
+    (GOOD + REFERENCE_ROWS + "C2,reference_center,0,0,30,0\n", (),
+     "row 8, column 'set': a second 'reference_center' row (the first is row 6)"),
+    (GOOD + REFERENCE_ROWS.splitlines()[0] + "\n", (),
+     "a 'reference_center' row without a 'reference_roll' row"),
+    (GOOD, ("--readings", "absolute", "--free-roll"), "--free-roll: only with --readings"),
+    (GOOD, ("--fit-frame-tilt",), "--fit-frame-tilt: only with --readings absolute"),
+    (GOOD, ("--roll-mirror", "up"), "invalid choice: 'up'"),
+    (GOOD, ("--angle-sigma-arcsec", "2", "--ins-sigma-arcsec", "1"), "not both"),
+])
+def test_procedure_bad_input_exits_2_with_one_line(tmp_path, capsys, text, options, needle):
+    data, out = tmp_path / "bad.csv", tmp_path / "fit.json"
+    data.write_text(text)
+    assert main(["collimation", "fit", str(data), "--json", str(out), *options]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1 and needle in captured.err, captured.err
+    assert not out.exists()
+
+
+def test_absolute_data_read_as_reference_readings_is_flagged(tmp_path, capsys):
+    """Absolute readings fitted as relative ones (the default) leave a misfit the report names."""
+    data = tmp_path / "abs.csv"
+    assert main(["collimation", "simulate", str(data), "--readings", "absolute", "--seed",
+                 "3"]) == 0
+    capsys.readouterr()
+    assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "2.83"]) == 0
+    assert "MISFIT" in capsys.readouterr().out
+    assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "2.83",
+                 "--readings", "absolute"]) == 0
+    assert "MISFIT" not in capsys.readouterr().out

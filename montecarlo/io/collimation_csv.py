@@ -2,8 +2,11 @@
 
     mirror,set,theodolite_az_deg,theodolite_el_deg,ins_az_deg,ins_el_deg[,ins_roll_deg]
 
-``set`` is ``azimuth`` or ``pitch``, the two mirror families of seed 003, section 3.1; angles
-are in degrees in the file and radians inside.
+``set`` is ``azimuth`` or ``pitch``, the two mirror families of seed 003, section 3.1, or (for
+the paper's procedure, section 3.2) ``reference_center`` / ``reference_roll``, the two reference
+mirrors; angles are in degrees in the file and radians inside. With the reference rows every INS
+reading is absolute; without them the readings are relative to the INS's reference
+(docs/collimation.md).
 """
 
 from __future__ import annotations
@@ -18,11 +21,15 @@ from numpy.typing import NDArray
 from montecarlo.errors import InputError
 from montecarlo.io.files import atomic_write_bytes
 from montecarlo.io.table import read_table
+from montecarlo.seed003.procedure import ProcedureData
 
 FloatArray = NDArray[np.float64]
 
 SETS = ("azimuth", "pitch")
 """The two mirror families of seed 003, section 3.1 (7 + 7 mirrors in the paper)."""
+
+REFERENCE_SETS = ("reference_center", "reference_roll")
+"""The central and the roll reference mirror of the procedure (seed 003, section 3.2)."""
 
 CSV_COLUMNS = ("mirror", "set", "theodolite_az_deg", "theodolite_el_deg", "ins_az_deg",
                "ins_el_deg")
@@ -68,24 +75,38 @@ class MirrorData:
                    np.zeros_like(az), None if roll is None else np.asarray(roll, float))
 
 
-def read_mirror_csv(path: str | Path, min_mirrors: int = 1, need: str = "") -> MirrorData:
+def read_mirror_csv(path: str | Path, min_mirrors: int = 1, need: str = "",
+                    sets: tuple[str, ...] = SETS) -> MirrorData:
     """Read and check a calibration CSV (:data:`CSV_COLUMNS`, optional ``ins_roll_deg``).
 
     ``min_mirrors`` is the fewest rows the caller can use; ``need`` says why (for the message).
+    ``sets`` are the accepted values of ``set``; with :data:`REFERENCE_SETS` among them each
+    reference set may appear once, and both or neither.
 
     Raises
     ------
     InputError
-        Missing column, non-numeric or NaN value, unknown ``set``, or too few mirrors; one line
-        naming file, row and column.
+        Missing column, non-numeric or NaN value, unknown ``set``, a reference row repeated or
+        alone, or too few mirrors; one line naming file, row and column.
     """
     numeric = [c for c in CSV_COLUMNS if c.endswith("_deg")]
     azimuth, elevation = (-360.0, 360.0), (-90.0, 90.0)
     table = read_table(path, numeric, optional_numeric=["ins_roll_deg"], text=["mirror", "set"],
-                       choices={"set": SETS},
+                       choices={"set": sets},
                        ranges={"theodolite_az_deg": azimuth, "ins_az_deg": azimuth,
                                "theodolite_el_deg": elevation, "ins_el_deg": elevation,
                                "ins_roll_deg": (-180.0, 180.0)})
+    kinds = list(table["set"])
+    for kind in REFERENCE_SETS:
+        rows = [i + 2 for i, k in enumerate(kinds) if k == kind]
+        if len(rows) > 1:
+            raise InputError(f"{path}: row {rows[1]}, column 'set': a second {kind!r} row "
+                             f"(the first is row {rows[0]})")
+    present = [k for k in REFERENCE_SETS if k in kinds]
+    if len(present) == 1:
+        other = next(k for k in REFERENCE_SETS if k not in present)
+        raise InputError(f"{path}: column 'set': a {present[0]!r} row without a {other!r} row "
+                         "(give both reference mirrors or neither)")
     if len(table) < min_mirrors:
         raise InputError(f"{path}: {len(table)} data rows, at least {min_mirrors} needed"
                          + (f" ({need})" if need else ""))
@@ -109,3 +130,10 @@ def write_mirror_csv(path: str | Path, data: MirrorData) -> None:
     for i, (name, kind) in enumerate(zip(data.mirror, data.sets, strict=True)):
         lines.append(",".join([name, kind, *(f"{v[i]:.9f}" for v in values)]))
     atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode())
+
+
+def procedure_data(data: MirrorData) -> ProcedureData:
+    """The rows as seed 003's procedure reads them (reference rows located by their ``set``)."""
+    index = {k: data.sets.index(k) if k in data.sets else None for k in REFERENCE_SETS}
+    return ProcedureData(data.theodolite_az, data.theodolite_el, data.ins_az, data.ins_el,
+                         data.ins_roll, index["reference_center"], index["reference_roll"])

@@ -121,6 +121,48 @@ def pair_figures() -> dict[str, Figure]:
     return figures
 
 
+def procedure_figure(offset: float = 300.0 * ARCSEC) -> Figure:
+    """The procedure's relative readings minus the mirror angles, exact and first order.
+
+    Left: horizontal mirrors against azimuth (pitch error from lambda through the reference);
+    right: mirrors at azimuth 0 against elevation (heading error from gamma and lambda). Level
+    mount, central mirror at (0, 0), roll mirror at (90 deg, 0) on the right; solid: exact
+    (:func:`montecarlo.seed003.reference.relative_readings`), dashed: first order
+    (:func:`montecarlo.seed003.reference.first_order_readings`).
+    """
+    from matplotlib.figure import Figure
+
+    from montecarlo.seed003 import reference as ref
+
+    fig = Figure(figsize=(9, 3.8), layout="constrained")
+    axes = fig.subplots(1, 2)
+    center, mirror = (0.0, 0.0, 0.0), (math.pi / 2, 0.0, 0.0)
+    az = np.radians(np.linspace(-90.0, 180.0, 271))
+    el = np.radians(np.linspace(0.0, 70.0, 141))
+    for k, (label, gamma, lam) in enumerate((("γ", offset, 0.0), ("λ", 0.0, offset))):
+        color = f"C{k}"
+        h, p, _ = ref.relative_readings(gamma, lam, az, 0 * az, 0.0, center, mirror)
+        h1, p1 = ref.first_order_readings(gamma, lam, az, 0 * az)
+        axes[0].plot(np.degrees(az), p / ARCSEC, "-", color=color, label=f"{label} pitch")
+        axes[0].plot(np.degrees(az), p1 / ARCSEC, "--", color=color)
+        axes[0].plot(np.degrees(az), wrap(h - az) / ARCSEC, ":", color=color,
+                     label=f"{label} heading")
+        h, p, _ = ref.relative_readings(gamma, lam, 0 * el, el, 0.0, center, mirror)
+        h1, p1 = ref.first_order_readings(gamma, lam, 0 * el, el)
+        axes[1].plot(np.degrees(el), wrap(h) / ARCSEC, "-", color=color, label=f"{label} heading")
+        axes[1].plot(np.degrees(el), wrap(h1) / ARCSEC, "--", color=color)
+        axes[1].plot(np.degrees(el), (p - el) / ARCSEC, ":", color=color, label=f"{label} pitch")
+    axes[0].set_xlabel("horizontal mirror: azimuth from the central mirror [deg]")
+    axes[1].set_xlabel("mirror at azimuth 0: elevation [deg]")
+    for a in axes:
+        a.set_ylabel("relative reading - mirror angle [arc-seconds]")
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7)
+    fig.suptitle(f"seed 003, section 3.2 procedure: offset {offset / ARCSEC:.0f}″ "
+                 "(solid exact, dashed first order), level mount, roll mirror right")
+    return fig
+
+
 def paper_statements(offset: float = math.radians(0.1)) -> list[dict[str, object]]:
     """Each statement of seed 003, section 2, evaluated with the model (offset ``offset`` [rad]).
 

@@ -197,7 +197,22 @@ def predict_readings(params: Mapping[str, ArrayLike], theodolite_az: ArrayLike,
     """
     p = getter(params)
     w = mirror_normal_in_nav(params, theodolite_az, theodolite_el)
-    u = direction(p("axis_az"), p("axis_el"))
+    return autocollimate(direction(p("axis_az"), p("axis_el")), w, roll)
+
+
+def autocollimate(u: ArrayLike, w: ArrayLike, roll: ArrayLike = 0.0
+                  ) -> tuple[FloatArray, FloatArray]:
+    """Heading and pitch [rad] of the attitude ``C`` with roll ``roll`` for which ``C u = w``.
+
+    The closed form of :func:`predict_readings` for an optical axis ``u`` (frame b, shape
+    (..., 3)) and a target direction ``w`` (shape (..., 3)) in whatever levelled frame the
+    attitude is wanted; heading in [-pi, pi), NaN where no pitch reaches ``w``.
+
+    References
+    ----------
+    seed 003, section 2 (the INS attitude recorded at each autocollimation).
+    """
+    u, w = np.asarray(u, float), np.asarray(w, float)
     roll = np.asarray(roll, float)
     ux = u[..., 0] * np.cos(roll) + u[..., 2] * np.sin(roll)  # u' = R_y(roll) u
     uy = u[..., 1]

@@ -48,6 +48,11 @@ DEFAULT_PARAMS: dict[str, float | int] = {
     "mount_roll_sigma": 0.0,
     "use_roll": 1,
     "fit_frame_tilt": 0,
+    "procedure": 0,
+    "reference_rows": 1,
+    "roll_mirror_left": 0,
+    "free_roll": 0,
+    "roll_prior_sigma": math.radians(2.0),
 }
 """Defaults of :func:`run_trials` (SI units, radians)."""
 
@@ -79,6 +84,9 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         ``mount_roll_sigma`` [rad]: spread of the true INS roll at the mirrors (0, level mount).
         ``use_roll`` [0/1]: fit with the reported roll (1) or assume roll 0 (0).
         ``fit_frame_tilt`` [0/1]: also fit ``frame_tilt_x``, ``frame_tilt_y``.
+        ``procedure`` [0/1]: simulate and fit the paper's procedure instead
+        (:func:`_procedure_trials`); with it ``reference_rows``, ``roll_mirror_left``,
+        ``free_roll`` [0/1] and ``roll_prior_sigma`` [rad].
     rng : numpy Generator, the only source of randomness.
     n : number of trials.
 
@@ -101,6 +109,8 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
     if unknown:
         raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {sorted(DEFAULT_PARAMS)}")
     p = {**DEFAULT_PARAMS, **params}
+    if int(p["procedure"]):
+        return _procedure_trials(p, rng, n)
     az, el, _ = paper_layout(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
                              float(p["pitch_span"]))
     truth = {k: float(p[k]) for k in parameter_names(EFFECTS)}
@@ -141,6 +151,69 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
     return out
 
 
+def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generator, n: int
+                      ) -> dict[str, FloatArray]:
+    """Trials of the paper's procedure (:mod:`montecarlo.seed003.procedure`).
+
+    Mirrors: ``n_azimuth`` horizontal ones at ``linspace(-0.4, 0.6, n_azimuth) * azimuth_span``
+    (the paper-like -30 ... 45 deg for a 75 deg span), ``n_pitch`` at azimuth 0 and elevations
+    ``pitch_span * (1 ... n_pitch) / n_pitch``; central reference mirror at 0, roll mirror at
+    +-90 deg. Rolls: ``free_roll`` fits them; else ``use_roll`` 1 records them (absolute with
+    reference rows, relative without), 0 assumes a level mount (biased when
+    ``mount_roll_sigma`` > 0: the cost of an unrecorded roll). ``frame_tilt_*`` and
+    ``fit_frame_tilt`` are not used. Metrics as :func:`run_trials`; ``frame_heading_error`` and
+    ``residual_rms_before`` are NaN; ``consistency_max_after`` is the largest angle between a
+    corrected reading and the theodolite's relative direction.
+    """
+    from montecarlo.seed003 import procedure as pr
+    from montecarlo.seed003 import reference as ref
+
+    span = float(p["azimuth_span"])
+    az, el, _ = pr.procedure_layout(np.linspace(-0.4 * span, 0.6 * span, int(p["n_azimuth"])),
+                                    float(p["pitch_span"]) * np.arange(1, int(p["n_pitch"]) + 1)
+                                    / max(int(p["n_pitch"]), 1))
+    side = -1.0 if int(p["roll_mirror_left"]) else 1.0
+    free = bool(int(p["free_roll"]))
+    noise = Noise(float(p["theodolite_sigma"]), float(p["ins_heading_sigma"]),
+                  float(p["ins_pitch_sigma"]), float(p["ins_roll_sigma"]),
+                  float(p["mount_roll_sigma"]))
+    s_ins = math.sqrt((noise.ins_heading ** 2 + noise.ins_pitch ** 2) / 2)
+    given = s_ins > 0 or noise.theodolite > 0
+    truth = (float(p["axis_az"]), float(p["axis_el"]))
+    u_true = direction(*truth)
+    out = {k: np.full(n, np.nan) for k in METRICS}
+    for i in range(n):
+        data = pr.simulate_procedure(*truth, az, el, noise, rng, side=side,
+                                     frame_heading=float(p["frame_heading"]),
+                                     reference_rows=bool(int(p["reference_rows"])),
+                                     with_roll=bool(int(p["use_roll"])) and not free)
+        try:
+            f = pr.fit_procedure(data, side=side, free_roll=free,
+                                 roll_sigma=float(p["roll_prior_sigma"]),
+                                 sigma_ins=s_ins if given else None,
+                                 sigma_theodolite=noise.theodolite if given else None,
+                                 before=False)
+        except pr.NotDetermined:
+            continue
+        got, se = f.params, f.stderr
+        for j, k in enumerate(("axis_az", "axis_el")):
+            out[f"{k}_error"][i] = got[k] - truth[j]
+            out[f"{k}_sigma"][i] = se[k]
+            out[f"{k}_within_2sigma"][i] = float(abs(got[k] - truth[j]) <= 2 * se[k])
+        u = direction(got["axis_az"], got["axis_el"])
+        out["axis_error_angle"][i] = np.arctan2(np.linalg.norm(np.cross(u, u_true)), u @ u_true)
+        out["residual_rms_after"][i] = np.sqrt(np.mean(f.residuals ** 2))
+        injected = math.sqrt(s_ins ** 2 + noise.theodolite ** 2)
+        if injected > 0:
+            out["residual_rms_ratio"][i] = out["residual_rms_after"][i] / injected
+        out["chi2_red"][i] = f.chi2_red
+        c_az, c_el, t_az, t_el, _ = pr.corrected_and_theodolite(data, f)
+        a, b = ref.direction(c_az, c_el), ref.direction(t_az, t_el)
+        out["consistency_max_after"][i] = np.max(np.arctan2(
+            np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1)))
+    return out
+
+
 COLLIMATION = ParamSystem(
     name="collimation",
     run_trials=run_trials,
@@ -148,7 +221,8 @@ COLLIMATION = ParamSystem(
     units={"axis_az": "arcsec", "axis_el": "arcsec", "frame_heading": "deg",
            "frame_tilt_x": "arcsec", "frame_tilt_y": "arcsec", "azimuth_span": "deg",
            "pitch_span": "deg", "theodolite_sigma": "arcsec", "ins_heading_sigma": "arcsec",
-           "ins_pitch_sigma": "arcsec", "ins_roll_sigma": "arcsec", "mount_roll_sigma": "deg"},
+           "ins_pitch_sigma": "arcsec", "ins_roll_sigma": "arcsec", "mount_roll_sigma": "deg",
+           "roll_prior_sigma": "deg"},
     metrics_=(
         *angle_metrics(("axis_az_error", "axis_el_error", "frame_heading_error"),
                  "fit error", "arcsec", signed=True),
@@ -170,6 +244,8 @@ COLLIMATION = ParamSystem(
             "azimuth_span": (0.0, 360.0), "pitch_span": (0.0, 89.0),
             **dict.fromkeys(("theodolite_sigma", "ins_heading_sigma", "ins_pitch_sigma",
                              "ins_roll_sigma"), (0.0, 3600.0)),
-            "mount_roll_sigma": (0.0, 45.0), "use_roll": (0, 1), "fit_frame_tilt": (0, 1)},
+            "mount_roll_sigma": (0.0, 45.0), "use_roll": (0, 1), "fit_frame_tilt": (0, 1),
+            "procedure": (0, 1), "reference_rows": (0, 1), "roll_mirror_left": (0, 1),
+            "free_roll": (0, 1), "roll_prior_sigma": (0.01, 45.0)},
 )
 """Seed 003: autocollimator-INS axis calibration, as a study system."""
