@@ -297,8 +297,8 @@ def test_acceptance_variants(i, mount, j, sampling, k, offset):
     """Acceptance at the defaults of run_trials, 256 trials per variant (about 4 min each);
     the table of docs/stabilization.md.
 
-    Each combination within max(5 %, 0.01 deg) and within 3 sigma in at least 99 % of the
-    trials. Honest sigma: pooled over the four combinations (1024 values) the fraction within
+    Each combination within max(5 %, 0.01 deg) in at least 99 % of the trials, and within
+    3 sigma in at least 98 % (0.9973 +- 0.0032 for honest sigma). Honest sigma: pooled over the four combinations (1024 values) the fraction within
     2 sigma is 0.954 +- 0.0065, bound [0.93, 0.975] (over 3 binomial sigma); each combination
     alone (256 values, 0.954 +- 0.013) within [0.90, 1.0].
     """
@@ -309,6 +309,6 @@ def test_acceptance_variants(i, mount, j, sampling, k, offset):
     spec = np.array([np.abs(out[f"{q}_error"]) <= np.maximum(
         0.05 * np.abs(out[f"{q}_true"]), ss.SPEC_FLOOR) for q in names])
     assert np.all(spec.mean(axis=1) >= 0.99)
-    assert np.all(_coverage(out, 3.0) >= 0.99)
+    assert np.all(_coverage(out, 3.0) >= 0.98)
     two = _coverage(out, 2.0)
     assert 0.93 <= two.mean() <= 0.975 and np.all(two >= 0.90), two
