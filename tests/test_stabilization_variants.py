@@ -298,9 +298,10 @@ def test_acceptance_variants(i, mount, j, sampling, k, offset):
     the table of docs/stabilization.md.
 
     Each combination within max(5 %, 0.01 deg) in at least 99 % of the trials, and within
-    3 sigma in at least 98 % (0.9973 +- 0.0032 for honest sigma). Honest sigma: pooled over the four combinations (1024 values) the fraction within
-    2 sigma is 0.954 +- 0.0065, bound [0.93, 0.975] (over 3 binomial sigma); each combination
-    alone (256 values, 0.954 +- 0.013) within [0.90, 1.0].
+    3 sigma in at least 98 % (0.9973 +- 0.0032 for honest sigma). Honest sigma: pooled over the
+    four combinations (1024 values) the fraction within 2 sigma is 0.954 +- 0.0065, bound
+    [0.93, 0.975] (over 3 binomial sigma); each combination alone (256 values, 0.954 +- 0.013)
+    within [0.90, 1.0].
     """
     out = ss.run_trials({"mount": mount, "gyro_sampling": sampling, "target_offset": offset},
                         np.random.default_rng(20130417 + 4 * i + 2 * j + k), 256)
