@@ -299,9 +299,10 @@ def test_acceptance_variants(i, mount, j, sampling, k, offset):
 
     Each combination within max(5 %, 0.01 deg) in at least 99 % of the trials, and within
     3 sigma in at least 98 % (0.9973 +- 0.0032 for honest sigma). Honest sigma: pooled over the
-    four combinations (1024 values) the fraction within 2 sigma is 0.954 +- 0.0065, bound
-    [0.93, 0.975] (over 3 binomial sigma); each combination alone (256 values, 0.954 +- 0.013)
-    within [0.90, 1.0].
+    four combinations the fraction within 2 sigma is 0.954; delta_px and delta_gx are nearly
+    one estimate (correlation near 1), so the 1024 values count as about 512 independent ones:
+    +- 0.0093, bound [0.925, 0.985] (3 sigma). Each combination alone (256 values,
+    0.954 +- 0.013) within [0.90, 1.0].
     """
     out = ss.run_trials({"mount": mount, "gyro_sampling": sampling, "target_offset": offset},
                         np.random.default_rng(20130417 + 4 * i + 2 * j + k), 256)
@@ -312,4 +313,4 @@ def test_acceptance_variants(i, mount, j, sampling, k, offset):
     assert np.all(spec.mean(axis=1) >= 0.99)
     assert np.all(_coverage(out, 3.0) >= 0.98)
     two = _coverage(out, 2.0)
-    assert 0.93 <= two.mean() <= 0.975 and np.all(two >= 0.90), two
+    assert 0.925 <= two.mean() <= 0.985 and np.all(two >= 0.90), two
