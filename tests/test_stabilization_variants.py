@@ -299,9 +299,9 @@ def test_acceptance_variants(i, mount, j, sampling, k, offset):
 
     Each combination within max(5 %, 0.01 deg) in at least 99 % of the trials, and within
     3 sigma in at least 98 % (0.9973 +- 0.0032 for honest sigma). Honest sigma: pooled over the
-    four combinations the fraction within 2 sigma is 0.954; delta_px and delta_gx are nearly
-    one estimate (correlation near 1), so the 1024 values count as about 512 independent ones:
-    +- 0.0093, bound [0.925, 0.985] (3 sigma). Each combination alone (256 values,
+    four combinations the fraction within 2 sigma is 0.954; the errors of delta_px, delta_gx
+    and delta_gy correlate at 0.87-0.94, so the 1024 values count as about 512 independent
+    ones: +- 0.0093, bound [0.925, 0.985] (3 sigma). Each combination alone (256 values,
     0.954 +- 0.013) within [0.90, 1.0].
     """
     out = ss.run_trials({"mount": mount, "gyro_sampling": sampling, "target_offset": offset},
