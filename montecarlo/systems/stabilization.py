@@ -101,8 +101,8 @@ def run_trials(
         ``accepted``, else 0.0); ``aim_error`` [px] (distance of the estimated aim point from
         the true one); ``los_rms_before``, ``los_rms_after`` [rad] (RMS of the true
         LOS error of the calibration run and of the compensated rerun), ``los_rms_ratio``
-        (after / before); ``residual_rms`` [px]; ``passes`` (RLS passes of the trial's chunk
-        of ``TRIAL_CHUNK`` trials). NaN marks a trial whose estimate did not converge.
+        (after / before); ``residual_rms`` [px] (per axis); ``passes`` (RLS passes of the
+        trial's chunk of ``TRIAL_CHUNK`` trials). NaN marks a trial whose estimate did not converge.
     """
     unknown = set(params) - set(DEFAULT_PARAMS)
     if unknown:
@@ -194,7 +194,7 @@ STABILIZATION = ParamSystem(
         Metric("accepted", "all four within 2σ and 5 % (mean = rate)", "1", 1.0),
         *angle_metrics(("los_rms_before", "los_rms_after"), "line-of-sight error RMS", "arcmin"),
         Metric("los_rms_ratio", "LOS error RMS after / before compensation", "1", 1.0),
-        Metric("residual_rms", "image residual RMS", "px", 1.0),
+        Metric("residual_rms", "image residual RMS per axis", "px", 1.0),
         Metric("aim_error", "aim point error", "px", 1.0),
     ),
     seconds_per_trial=0.5,
