@@ -89,3 +89,34 @@ def test_observability_reports_rank_and_the_unseen_direction():
     level_roll = run_cli("observability", *SHORT, "--rock-amp-deg", "0", "0", "5",
                          "--aim-deg", "0", "0")
     assert "rank 2 of 4" in level_roll.stdout and "not observable" in level_roll.stdout
+
+
+def test_inner_gimbal_interval_mean_off_centre_round_trip(tmp_path):
+    path = tmp_path / "inner.csv"
+    variant = ["--mount", "inner-gimbal", "--gyro-sampling", "interval-mean"]
+    out = run_cli("simulate", str(path), *SHORT, *variant, "--target-px", "300", "0",
+                  "--seed", "4")
+    assert out.returncode == 0, out.stderr
+    assert "inner-gimbal mount" in out.stdout and "delta_gz = 42.0000" in out.stdout
+    out = run_cli("estimate", str(path), *variant, "--json")
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    assert result["mount"] == "inner-gimbal" and result["gyro_sampling"] == "interval-mean"
+    truth = {**TRUTH_ARCMIN, "delta_gz": 42.0}
+    for name, value in truth.items():
+        p = result["parameters"][name]
+        assert abs(p["value"] - value) <= 4 * p["sigma"], (name, p)
+    assert abs(result["aim_px"][0] - 300.0) < 0.1 and abs(result["aim_px"][1]) < 0.1
+
+
+def test_observability_of_the_inner_gimbal_mount_separates_dpz_and_dgz():
+    out = run_cli("observability", *SHORT, "--mount", "inner-gimbal")
+    assert out.returncode == 0, out.stderr
+    assert "rank 5 of 5 for X" in out.stdout and "rank 5 of 5 for [dpx" in out.stdout
+    assert "unseen direction" not in out.stdout
+
+
+@pytest.mark.parametrize("flag", [["--mount", "outer"], ["--gyro-sampling", "mean"]])
+def test_unknown_variant_exits_2(flag):
+    out = run_cli("estimate", "x.csv", *flag)
+    assert out.returncode == 2 and "Traceback" not in out.stderr and flag[0] in out.stderr

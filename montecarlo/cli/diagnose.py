@@ -1,4 +1,5 @@
-"""The discrepancy workflow: ``diagnose ground | collimation``, ``synth ground | collimation``."""
+"""The discrepancy workflow: ``diagnose ground | collimation | stabilization``,
+``synth ground | collimation``."""
 
 from __future__ import annotations
 
@@ -119,6 +120,36 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
 
 
+def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
+    from montecarlo.discrepancy import stabilization_effects as ste
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.fit import FitError
+    from montecarlo.discrepancy.view import format_text, to_json
+    from montecarlo.geometry.camera import Camera
+    from montecarlo.io.stabilization_csv import read_csv
+    from montecarlo.output.provenance import provenance
+    from montecarlo.units import DEG_PER_ROOT_HOUR
+
+    check_json_option(args)
+    record = read_csv(args.data)
+    camera = Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
+    gyro_noise = args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR
+    try:
+        d = diagnose(ste.stabilization_problem(record, camera, args.image_noise_px, gyro_noise,
+                                               args.mount, args.gyro_sampling), args.alpha)
+    except FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
+                     str(args.data))
+    record_args = {"input": str(args.data), "alpha": args.alpha, "mount": args.mount,
+                   "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
+                   "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
+    if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
+        return 0
+    print(format_text(report))
+    return 0
+
+
 def _cmd_synth_ground(args: argparse.Namespace) -> int:
 
     from montecarlo.discrepancy import ground_effects as ge
@@ -231,6 +262,27 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="standard deviation of each heading and pitch residual [arc-seconds]")
     common(p)
     p.set_defaults(func=_cmd_diagnose_collimation)
+
+    p = dsub.add_parser("stabilization", help="gyro indirect-stabilisation run (seed 001): "
+                        "the estimator's model against a scale factor, delays, the camera mount")
+    p.add_argument("data", help="CSV: t_s, gyro_x, gyro_y, gyro_z, eta_rad, eps_rad, "
+                   "los_x_px, los_z_px")
+    p.add_argument("--fov-deg", type=field_of_view, default=5.0,
+                   help="square field of view [deg] (5)")
+    p.add_argument("--pixels", type=positive_int, default=1024,
+                   help="pixels across the image (1024)")
+    p.add_argument("--image-noise-px", type=positive, default=0.1,
+                   help="image noise per axis [px] (0.1)")
+    p.add_argument("--gyro-arw-deg-per-rt-h", type=nonnegative, default=0.01,
+                   help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
+    p.add_argument("--mount", choices=("patent", "inner-gimbal"), default="patent",
+                   help="camera mount of the base model (patent)")
+    p.add_argument("--gyro-sampling", choices=("point", "interval-mean"), default="point",
+                   help="what a gyro row holds (point)")
+    add_json_option(p, "the diagnosis")
+    p.add_argument("--alpha", type=probability, default=0.01,
+                   help="significance of the tests (default 0.01)")
+    p.set_defaults(func=_cmd_diagnose_stabilization)
 
     syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
     ssub = syn.add_subparsers(dest="synth_command", required=True, parser_class=Parser)

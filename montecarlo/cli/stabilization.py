@@ -42,7 +42,9 @@ def _stabilization_setup(args: argparse.Namespace):
                        aim_azimuth=np.radians(args.aim_deg[0]),
                        aim_pitch=np.radians(args.aim_deg[1]), camera=_stabilization_camera(args),
                        image_noise=args.image_noise_px,
-                       gyro_noise=args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR)
+                       gyro_noise=args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR,
+                       target_px=tuple(getattr(args, "target_px", (0.0, 0.0))),
+                       mount=args.mount, gyro_sampling=getattr(args, "gyro_sampling", "point"))
     return rocking, setup
 
 
@@ -59,7 +61,11 @@ def _cmd_stabilization_simulate(args: argparse.Namespace) -> int:
     write_csv(args.out, record)
     truth = {"delta_px": delta_p[0], "delta_gx": delta_g[0], "delta_gy": delta_g[1],
              "delta_z": delta_p[2] - delta_g[2], "delta_py": delta_p[1]}
-    print(f"wrote {args.out}: {record.t.size} rows, {setup.duration:g} s at {setup.rate:g} Hz")
+    if setup.mount == "inner-gimbal":
+        truth["delta_gz"] = delta_g[2]
+    print(f"wrote {args.out}: {record.t.size} rows, {setup.duration:g} s at {setup.rate:g} Hz; "
+          f"{setup.mount} mount, gyro rows {setup.gyro_sampling}, target at "
+          f"({setup.target_px[0]:g}, {setup.target_px[1]:g}) px")
     print("true values [arcmin]: " + ", ".join(f"{k} = {v / ARCMIN:.4f}"
                                                 for k, v in truth.items()))
     print(f"LOS stabilisation error RMS: {np.sqrt(np.mean(record.los_error**2)) / ARCMIN:.4f}"
@@ -69,28 +75,33 @@ def _cmd_stabilization_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     from montecarlo.io.stabilization_csv import read_csv
-    from montecarlo.seed001.estimate import PARAMETER_NAMES, estimate
+    from montecarlo.seed001.estimate import estimate
 
     check_json_option(args)
     record = read_csv(args.csv)
     est = estimate(record.t, record.gyro, record.eta, record.eps, record.los_px,
                       _stabilization_camera(args), args.image_noise_px,
-                      args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR,
-                      forgetting=args.forgetting, max_passes=args.passes)
-    units = [ARCMIN] * 5 + [DEG_PER_HOUR] * 3
+                      args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR, mount=args.mount,
+                      gyro_sampling=args.gyro_sampling, forgetting=args.forgetting,
+                      max_passes=args.passes)
+    units = [ARCMIN if name.startswith("delta") else DEG_PER_HOUR for name in est.names]
     rows = {name: (float(v / u), float(s / u)) for name, v, s, u in
-            zip(PARAMETER_NAMES, est.values, est.sigma, units, strict=True)}
+            zip(est.names, est.values, est.sigma, units, strict=True)}
+    aim = [float(a) for a in est.aim_px]
     if args.json is not None:
         from montecarlo.output.provenance import provenance
 
         if emit_json(args, {
             "file": str(args.csv), "rows": int(record.t.size), "passes": est.passes,
             "converged": bool(est.converged), "residual_rms_px": float(est.residual_rms),
-            "units": {"delta_*": "arcmin", "bias_*": "deg/h", "sigma": "1 standard deviation"},
+            "mount": args.mount, "gyro_sampling": args.gyro_sampling, "aim_px": aim,
+            "units": {"delta_*": "arcmin", "bias_*": "deg/h", "aim_px": "px",
+                      "sigma": "1 standard deviation"},
             "parameters": {k: {"value": v, "sigma": s} for k, (v, s) in rows.items()},
             "provenance": provenance("stabilization estimate", input=str(args.csv),
                                      image_noise_px=args.image_noise_px,
                                      gyro_arw_deg_per_rt_h=args.gyro_arw_deg_per_rt_h,
+                                     mount=args.mount, gyro_sampling=args.gyro_sampling,
                                      forgetting=args.forgetting, passes=args.passes),
         }):
             return 0
@@ -99,35 +110,40 @@ def _cmd_stabilization_estimate(args: argparse.Namespace) -> int:
     else:
         state = "converged" if est.converged else "NOT converged: raise --passes"
     print(f"installation angles (seed 001) from {args.csv}: {record.t.size} rows, "
-          f"{record.t[-1] - record.t[0]:g} s; {est.passes} RLS passes, {state}")
+          f"{record.t[-1] - record.t[0]:g} s; {args.mount} mount, gyro rows "
+          f"{args.gyro_sampling}; {est.passes} RLS passes, {state}")
     print("angles in arc-minutes (1 arcmin = 0.2909 mrad), gyro biases in deg/h; "
           "± is one standard deviation")
-    notes = {"delta_z": "= dpz - dgz (dpz and dgz are not separable)",
-             "delta_py": "camera roll about the LOS (seen only at second order)"}
+    notes = {"delta_z": "= dpz - dgz (dpz and dgz are not separable)"
+             if args.mount == "patent" else "= dpz - dgz",
+             "delta_py": "camera roll about the LOS (seen only at second order)",
+             "delta_gz": "IMU yaw (separable from dpz with this mount)"}
     for name, (v, s) in rows.items():
         unit = "arcmin" if name.startswith("delta") else "deg/h"
         print(f"  {name:9s} {v:12.4f} ± {s:8.4f} {unit:7s}{notes.get(name, '')}")
-    print(f"image residual RMS: {float(est.residual_rms):.3f} px (includes the LOS walk of gyro "
-          f"noise; image noise assumed {args.image_noise_px:g} px per axis)")
+    print(f"aim point (target's image at the first sample): ({aim[0]:.3f}, {aim[1]:.3f}) px")
+    print(f"image residual RMS per axis: {float(est.residual_rms):.3f} px (includes the LOS walk "
+          f"of gyro noise; image noise assumed {args.image_noise_px:g} px per axis)")
     return 0
 
 
 def _cmd_stabilization_observability(args: argparse.Namespace) -> int:
-    from montecarlo.seed001.linear_model import OBSERVABLE_NAMES, observability
+    from montecarlo.seed001.linear_model import model_names, observability
     from montecarlo.seed001.simulate import simulate
 
 
     rocking, setup = _stabilization_setup(args)
     record = simulate(rocking, dataclasses.replace(setup, gyro_noise=0.0), 0.0, 0.0)
-    obs = observability(record, setup.camera, setup.image_noise)
-    print(f"rank {obs.rank} of 4 for X = [delta_px, delta_gx, delta_gy, delta_z]; "
+    obs = observability(record, setup.camera, setup.image_noise, mount=setup.mount)
+    names = model_names(setup.mount)
+    print(f"{setup.mount} mount: rank {obs.rank} of {len(names)} for X = [{', '.join(names)}]; "
           f"rank {obs.raw_rank} of 5 for [dpx, dpz, dgx, dgy, dgz]")
     for row in obs.raw_null_space:
         print("  unseen direction of [dpx, dpz, dgx, dgy, dgz]: "
               + "[" + ", ".join(f"{x:+.3f}" for x in row) + "]")
     print("Cramer-Rao sigma from image noise (gyro biases and aim point estimated too) "
           "[arcmin]:")
-    for name, sigma in zip(OBSERVABLE_NAMES, obs.sigma, strict=True):
+    for name, sigma in zip(names, obs.sigma, strict=True):
         print(f"  {name:9s} {sigma / ARCMIN:10.4f}" if np.isfinite(sigma)
               else f"  {name:9s} not observable")
     return 0
@@ -150,6 +166,20 @@ def _add_stabilization_profile(p: argparse.ArgumentParser) -> None:
                    help="image noise per axis [px] (0.1)")
     p.add_argument("--gyro-arw-deg-per-rt-h", type=finite, default=0.01,
                    help="gyro angle random walk [deg/sqrt(h)] (0.01)")
+    _add_mount(p)
+
+
+def _add_mount(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mount", choices=("patent", "inner-gimbal"), default="patent",
+                   help="camera mount: 'patent' (eq. (2): the installation angles add to the "
+                   "gimbal angles) or 'inner-gimbal' (camera on the pitch gimbal, its "
+                   "installation rotation after the gimbal's) (patent)")
+
+
+def _add_gyro_sampling(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--gyro-sampling", choices=("point", "interval-mean"), default="point",
+                   help="what a gyro row holds: the rate at its time ('point') or the mean "
+                   "rate over the interval ending there ('interval-mean') (point)")
 
 
 def _add_stabilization_camera(p: argparse.ArgumentParser) -> None:
@@ -175,6 +205,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                      metavar=("PX", "PY", "PZ"), help="camera installation angles [arcmin]")
     sim.add_argument("--gyro-bias-deg-per-h", type=finite, nargs=3, default=[0.0, 0.0, 0.0],
                      metavar=("X", "Y", "Z"), help="gyro biases [deg/h] (0 0 0)")
+    sim.add_argument("--target-px", type=finite, nargs=2, default=[0.0, 0.0],
+                     metavar=("X", "Z"), help="image position of the target at the start "
+                     "[px], x right, z up (0 0: where the LOS aims)")
+    _add_gyro_sampling(sim)
     sim.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (0)")
     sim.set_defaults(func=_cmd_stabilization_simulate)
 
@@ -185,6 +219,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                      help="image noise per axis [px] (0.1)")
     est.add_argument("--gyro-arw-deg-per-rt-h", type=finite, default=0.01,
                      help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
+    _add_mount(est)
+    _add_gyro_sampling(est)
     est.add_argument("--forgetting", type=forgetting, default=1.0,
                      help="RLS forgetting factor in (0, 1] (1: none)")
     est.add_argument("--passes", type=positive_int, default=10,

@@ -3,6 +3,11 @@
 One row per sample::
 
     t_s, gyro_x, gyro_y, gyro_z, eta_rad, eps_rad, los_x_px, los_z_px
+
+The gyro columns hold either the IMU rate at ``t_s`` (``point``) or its mean over the sample
+interval ending at ``t_s`` (``interval-mean``: the IMU's delta-angle over its last interval
+divided by the interval, the first row's interval as long as the second's). The file does not
+say which: the reader states it (``--gyro-sampling``).
 """
 
 from __future__ import annotations

@@ -37,9 +37,15 @@ from scipy.spatial.transform import Rotation
 
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
-from montecarlo.seed001.kinematics import camera_matrix
-from montecarlo.seed001.linear_model import drift_matrix, image_roll_rate, plane_rotation
-from montecarlo.seed001.simulate import Compensation, Record, Setup
+from montecarlo.seed001.kinematics import camera_matrix, check_mount
+from montecarlo.seed001.linear_model import drift_matrix
+from montecarlo.seed001.simulate import (
+    Compensation,
+    Record,
+    Setup,
+    check_sampling,
+    target_direction,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -49,23 +55,55 @@ PARAMETER_NAMES = ("delta_px", "delta_gx", "delta_gy", "delta_z", "delta_py",
 
 ROLL = PARAMETER_NAMES.index("delta_py")
 
+INNER_GIMBAL_PARAMETER_NAMES = (*PARAMETER_NAMES, "delta_gz")
+"""With the inner-gimbal mount ``dgz`` is estimated too, after the biases; ``dpz = delta_z +
+dgz``."""
+
+
+def parameter_names(mount: str = "patent") -> tuple[str, ...]:
+    """Estimated parameters of a camera mount, in state order."""
+    return INNER_GIMBAL_PARAMETER_NAMES if check_mount(mount) == "inner-gimbal" \
+        else PARAMETER_NAMES
+
 PRIOR_SIGMA = {"angle": np.radians(5.0), "bias": np.radians(50.0) / 3600.0, "offset": 100.0}
-"""Prior standard deviations: installation angles [rad], gyro biases [rad/s], initial image
-offset of the target [px]. Wide enough not to pull observable parameters; they keep the
+"""Prior standard deviations: installation angles [rad], gyro biases [rad/s], the aim point's
+correction in each pass [px]. Wide enough not to pull observable parameters; they keep the
 unobservable ones (e.g. ``delta_py`` when the drift is small) finite."""
 
 
-def carrier_attitude(t: ArrayLike, omega: ArrayLike) -> FloatArray:
+def rate_spline(t: ArrayLike, omega: ArrayLike, sampling: str = "point"):
+    """Continuous rate through gyro samples: a callable ``omega(t)``, shape (..., 3) [rad/s].
+
+    ``point``: the cubic spline through the samples. ``interval-mean`` (row k is the mean over
+    ``(t_{k-1}, t_k]``, the first interval as long as the second): the derivative of the cubic
+    spline through the accumulated delta-angles, so that its mean over each interval is the
+    sample.
+    """
+    t = np.asarray(t, float)
+    omega = np.asarray(omega, float)
+    axis = omega.ndim - 2
+    if check_sampling(sampling) == "point":
+        return CubicSpline(t, omega, axis=axis)
+    edges = np.concatenate([[2.0 * t[0] - t[1]], t])
+    step = np.diff(edges)[:, None] * omega
+    angle = np.concatenate([np.zeros_like(step[..., :1, :]), np.cumsum(step, axis=-2)], axis=-2)
+    return CubicSpline(edges, angle, axis=axis).derivative()
+
+
+def carrier_attitude(t: ArrayLike, omega: ArrayLike, sampling: str = "point") -> FloatArray:
     """Attitude of the carrier relative to its attitude at ``t[0]``, from its sampled rate.
 
-    The rate is interpolated by a cubic spline and each step integrated by the fourth-order
-    Magnus formula with two Gauss points, ``Omega = h/2 (w1 + w2) + sqrt(3)/12 h^2 w1 x w2``.
+    The rate is interpolated by a cubic spline (:func:`rate_spline`) and each step integrated
+    by the fourth-order Magnus formula with two Gauss points,
+    ``Omega = h/2 (w1 + w2) + sqrt(3)/12 h^2 w1 x w2``.
 
     Parameters
     ----------
     t : array_like, shape (N,) [s]
     omega : array_like, shape (..., N, 3) [rad/s]
         Body rate in body axes.
+    sampling : {"point", "interval-mean"}
+        What a sample of ``omega`` is (:data:`montecarlo.seed001.simulate.GYRO_SAMPLINGS`).
 
     Returns
     -------
@@ -74,7 +112,7 @@ def carrier_attitude(t: ArrayLike, omega: ArrayLike) -> FloatArray:
     """
     t = np.asarray(t, float)
     omega = np.asarray(omega, float)
-    spline = CubicSpline(t, omega, axis=omega.ndim - 2)
+    spline = rate_spline(t, omega, sampling)
     h = np.diff(t)
     mid, half = t[:-1] + 0.5 * h, h * np.sqrt(3.0) / 6.0
     w1, w2 = spline(mid - half), spline(mid + half)
@@ -98,22 +136,32 @@ def predict_los(
     eps: ArrayLike,
     params: ArrayLike,
     camera: Camera,
+    aim_px: ArrayLike = 0.0,
+    *,
+    mount: str = "patent",
+    gyro_sampling: str = "point",
 ) -> FloatArray:
     """Image position of the target predicted with the exact kinematics for given parameters.
 
     The carrier rate is rebuilt from the IMU output, ``w_b = (R_y(dgy) R_x(dgx))^T (w_m - bias)``
-    (in the carrier frame turned by ``dgz``, where ``dpz`` becomes ``delta_z``), integrated to
-    the carrier's attitude; the camera is at ``camera_matrix(eta, eps, [dpx, dpy, delta_z])``;
-    the target is where it looked at ``t[0]``.
+    (in the carrier frame turned by ``dgz``), integrated to the carrier's attitude; the camera
+    is at the encoder angles: ``camera_matrix(eta, eps, [dpx, dpy, delta_z])`` with the patent
+    mount (``dpz`` becomes ``delta_z`` in the turned frame), ``camera_matrix(eta - dgz, eps,
+    [dpx, dpy, delta_z + dgz])`` with the inner-gimbal mount; the target is the fixed direction
+    imaged at ``aim_px`` at ``t[0]``.
 
     Parameters
     ----------
     t : array_like, shape (N,) [s]
     gyro : array_like, shape (..., N, 3) [rad/s]
     eta, eps : array_like, shape (..., N) [rad]
-    params : array_like, shape (..., 8)
-        In the order of ``PARAMETER_NAMES``.
+    params : array_like, shape (..., 8) or (..., 9)
+        In the order of :func:`parameter_names` of ``mount``.
     camera : Camera
+    aim_px : array_like, shape (..., 2) [px]
+        Image position of the target at ``t[0]`` (the aim point).
+    mount : {"patent", "inner-gimbal"}
+    gyro_sampling : {"point", "interval-mean"}
 
     Returns
     -------
@@ -127,17 +175,27 @@ def predict_los(
     C_bg = mounting_matrix(0.0, p[..., 1], p[..., 2])  # seed 001, eq. (1) with dgz = 0
     omega_b = np.matmul(np.swapaxes(C_bg, -1, -2)[..., None, :, :],
                         (np.asarray(gyro, float) - p[..., None, 5:8])[..., None])[..., 0]
-    R = carrier_attitude(t, omega_b)
-    delta_p = np.stack([p[..., 0], p[..., 4], p[..., 3]], axis=-1)
-    C_bc = camera_matrix(eta, eps, delta_p[..., None, :])  # seed 001, eq. (2)
-    target = C_bc[..., 0, 1, :]
+    R = carrier_attitude(t, omega_b, gyro_sampling)
+    if check_mount(mount) == "inner-gimbal":
+        dgz = p[..., 8, None]
+        delta_p = np.stack([p[..., 0], p[..., 4], p[..., 3] + p[..., 8]], axis=-1)
+        C_bc = camera_matrix(np.asarray(eta) - dgz, eps, delta_p[..., None, :], mount)
+    else:
+        delta_p = np.stack([p[..., 0], p[..., 4], p[..., 3]], axis=-1)
+        C_bc = camera_matrix(eta, eps, delta_p[..., None, :])  # seed 001, eq. (2)
+    aim = np.broadcast_to(np.asarray(aim_px, float), (*C_bc.shape[:-3], 2))
+    target = target_direction(C_bc[..., 0, :, :], aim, camera)
     target_k = np.matmul(np.swapaxes(R, -1, -2), target[..., None, :, None])
     u = np.matmul(C_bc, target_k)[..., 0]
     return np.stack(pixels_from_direction(u, camera), axis=-1)
 
 
 JACOBIAN_STEP = np.array([1e-6] * 5 + [1e-9] * 3)
-"""Forward-difference steps of :func:`los_jacobian`: angles [rad], biases [rad/s]."""
+"""Forward-difference steps of :func:`los_jacobian`: angles [rad], biases [rad/s]; ``dgz``
+(inner-gimbal mount) takes the angles' step, the aim point ``AIM_STEP``."""
+
+AIM_STEP = 1e-3
+"""Forward-difference step of the aim point [px]."""
 
 
 def los_jacobian(
@@ -148,22 +206,40 @@ def los_jacobian(
     params: ArrayLike,
     camera: Camera,
     predicted: ArrayLike | None = None,
+    aim_px: ArrayLike = 0.0,
+    *,
+    mount: str = "patent",
+    gyro_sampling: str = "point",
+    columns: str = "all",
 ) -> FloatArray:
     """Jacobian of :func:`predict_los` with respect to the parameters, by forward differences.
 
+    ``columns``: ``"all"`` (the parameters, then the aim point ``[x, z]``), ``"params"`` or
+    ``"aim"``.
+
     Returns
     -------
-    ndarray, shape (..., N, 2, 8) [px per parameter unit]
+    ndarray, shape (..., N, 2, n) [px per parameter unit]
     """
     params = np.asarray(params, float)
+    aim = np.asarray(aim_px, float) + np.zeros(2)
+    kw = {"mount": mount, "gyro_sampling": gyro_sampling}
     if predicted is None:
-        predicted = predict_los(t, gyro, eta, eps, params, camera)
-    columns = []
-    for j, h in enumerate(JACOBIAN_STEP):
-        moved = params.copy()
-        moved[..., j] += h
-        columns.append((predict_los(t, gyro, eta, eps, moved, camera) - predicted) / h)
-    return np.stack(columns, axis=-1)
+        predicted = predict_los(t, gyro, eta, eps, params, camera, aim, **kw)
+    steps = np.append(JACOBIAN_STEP, [1e-6] * (params.shape[-1] - JACOBIAN_STEP.size))
+    out = []
+    if columns in ("all", "params"):
+        for j, h in enumerate(steps):
+            moved = params.copy()
+            moved[..., j] += h
+            out.append((predict_los(t, gyro, eta, eps, moved, camera, aim, **kw) - predicted) / h)
+    if columns in ("all", "aim"):
+        for j in range(2):
+            moved = aim.copy()
+            moved[..., j] += AIM_STEP
+            out.append((predict_los(t, gyro, eta, eps, params, camera, moved, **kw)
+                        - predicted) / AIM_STEP)
+    return np.stack(out, axis=-1)
 
 
 def recursive_least_squares(
@@ -244,15 +320,21 @@ class Estimate:
 
     Attributes
     ----------
-    values : ndarray, shape (..., 8)
-        In the order of ``PARAMETER_NAMES``; angles [rad], biases [rad/s].
-    covariance : ndarray, shape (..., 8, 8)
+    values : ndarray, shape (..., n)
+        In the order of :func:`parameter_names` of ``mount`` (8 parameters, 9 with the
+        inner-gimbal mount); angles [rad], biases [rad/s].
+    covariance : ndarray, shape (..., n, n)
     passes : int
         RLS passes run.
     converged : ndarray of bool, shape (...)
-        The last pass moved every parameter by less than ``tol`` of its standard deviation.
+        The last pass moved every parameter and the aim point by less than ``tol`` of their
+        standard deviations.
     residual_rms : ndarray, shape (...) [px]
-        RMS of the measured minus predicted image position (offset and walk removed).
+        RMS per image axis of the measured minus the predicted image position (with the
+        estimated aim point); it includes the LOS walk of gyro noise.
+    aim_px : ndarray, shape (..., 2) [px]
+        Estimated image position of the target at the first sample.
+    mount : str
     """
 
     values: FloatArray
@@ -260,10 +342,16 @@ class Estimate:
     passes: int
     converged: NDArray[np.bool_]
     residual_rms: FloatArray
+    aim_px: FloatArray
+    mount: str = "patent"
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return parameter_names(self.mount)
 
     @property
     def sigma(self) -> FloatArray:
-        """Standard deviations, shape (..., 8)."""
+        """Standard deviations, shape (..., n)."""
         return np.sqrt(np.diagonal(self.covariance, axis1=-2, axis2=-1))
 
     @property
@@ -273,7 +361,9 @@ class Estimate:
 
     def compensation(self) -> Compensation:
         """The corrections a stabilisation loop applies (claim 1, fourth step)."""
-        return Compensation(angles=self.values[..., :4], gyro_bias=self.values[..., 5:8])
+        dgz = self.values[..., 8] if self.mount == "inner-gimbal" else 0.0
+        return Compensation(angles=self.values[..., :4], gyro_bias=self.values[..., 5:8],
+                            delta_gz=dgz, mount=self.mount)
 
 
 def estimate(
@@ -286,11 +376,20 @@ def estimate(
     image_noise: float,
     gyro_noise: float = 0.0,
     *,
+    mount: str = "patent",
+    gyro_sampling: str = "point",
     forgetting: float = 1.0,
     max_passes: int = 10,
     tol: float = 1e-2,
 ) -> Estimate:
-    """Estimate installation angles and gyro biases from a run (or a batch of runs).
+    """Estimate installation angles, gyro biases and the aim point from a run (or a batch).
+
+    The state of each RLS pass holds the corrections to the parameters and to the aim point
+    (the target's image at ``t[0]``, started at the first measured position, prior
+    ``PRIOR_SIGMA["offset"]`` per pass) and the LOS walk of gyro noise: it starts at zero, its
+    increments have variance ``gyro_noise**2 dt k**2`` per axis, and it turns as an error of the
+    aim point does, ``F_k = J_k J_{k-1}^-1`` with ``J_k`` the aim point's Jacobian (the true
+    image roll and the pinhole's scale at the current parameters).
 
     Parameters
     ----------
@@ -304,6 +403,10 @@ def estimate(
         Standard deviation of each image coordinate.
     gyro_noise : float [rad/s/sqrt(Hz)]
         White-noise density of the gyros (0: no LOS walk is modelled).
+    mount : {"patent", "inner-gimbal"}
+        Camera mount of the model (:func:`montecarlo.seed001.kinematics.camera_matrix`).
+    gyro_sampling : {"point", "interval-mean"}
+        What a gyro row holds (:data:`montecarlo.seed001.simulate.GYRO_SAMPLINGS`).
     forgetting : float in (0, 1]
     max_passes : int
         RLS passes. The first uses the first-order rows about zero
@@ -321,54 +424,61 @@ def estimate(
     gyro, eta, eps, los_px = (np.asarray(a, float) for a in (gyro, eta, eps, los_px))
     batch = np.broadcast_shapes(gyro.shape[:-2], eta.shape[:-1], eps.shape[:-1],
                                 los_px.shape[:-2])
-    n_par = len(PARAMETER_NAMES)
-    rows7 = drift_matrix(t, gyro, eta, eps, camera)  # first-order model about zero
-    first_rows = np.concatenate([rows7[..., :ROLL], np.zeros((*rows7.shape[:-1], 1)),
-                                 rows7[..., ROLL:]], axis=-1)
-    k_x, k_z = float(camera.k_x), float(camera.k_z)
-
-    # random walk of the image offset: turned with the image roll, driven by gyro noise
-    scale = np.diag([k_x, k_z])
-    roll_rate = image_roll_rate(gyro, eta, eps)
-    turn = np.concatenate([np.zeros((*roll_rate.shape[:-1], 1)),
-                           0.5 * (roll_rate[..., 1:] + roll_rate[..., :-1]) * np.diff(t)], -1)
-    walk_transition = scale @ plane_rotation(turn) @ np.linalg.inv(scale)
+    names = parameter_names(mount)
+    n_par = len(names)
+    kw = {"mount": mount, "gyro_sampling": gyro_sampling}
+    model = drift_matrix(t, gyro, eta, eps, camera, mount=mount)  # first order about zero
+    n_x = model.shape[-1] - 3
+    first_rows = np.zeros((*model.shape[:-1], n_par))
+    first_rows[..., :4] = model[..., :4]
+    first_rows[..., 5:8] = model[..., n_x:]
+    first_rows[..., 8:] = model[..., 4:n_x]
     walk_var = None
     if gyro_noise > 0.0:
         dt = np.diff(t, prepend=t[0])[:, None]
-        walk_var = np.broadcast_to(gyro_noise**2 * dt * np.array([k_x, k_z]) ** 2,
-                                   (*batch, t.size, 2))
+        k = np.array([float(camera.k_x), float(camera.k_z)])
+        walk_var = np.broadcast_to(gyro_noise**2 * dt * k**2, (*batch, t.size, 2))
 
     sig = np.array([PRIOR_SIGMA["angle"]] * 5 + [PRIOR_SIGMA["bias"]] * 3
-                   + [PRIOR_SIGMA["offset"]] * 2)
-    prior_cov = np.diag(sig**2)
+                   + [PRIOR_SIGMA["angle"]] * (n_par - 8) + [PRIOR_SIGMA["offset"]] * 2)
+    prior_cov = np.diag(np.append(sig**2, [0.0, 0.0]))
     params = np.zeros((*batch, n_par))
+    aim = np.array(np.broadcast_to(los_px[..., 0, :], (*batch, 2)))
     converged = np.zeros(batch, bool)
     cov = np.broadcast_to(prior_cov[:n_par, :n_par], (*batch, n_par, n_par))
     passes = 0
     for passes in range(1, max_passes + 1):
-        predicted = predict_los(t, gyro, eta, eps, params, camera)
-        rows = first_rows if passes == 1 else los_jacobian(t, gyro, eta, eps, params, camera,
-                                                           predicted)
-        prior_mean = np.concatenate([-params, np.zeros((*batch, 2))], axis=-1)
+        predicted = predict_los(t, gyro, eta, eps, params, camera, aim, **kw)
+        if passes == 1:
+            aim_rows = los_jacobian(t, gyro, eta, eps, params, camera, predicted, aim,
+                                    columns="aim", **kw)
+            rows = np.concatenate([np.broadcast_to(first_rows, (*batch, *first_rows.shape[-3:])),
+                                   aim_rows], axis=-1)
+        else:
+            rows = los_jacobian(t, gyro, eta, eps, params, camera, predicted, aim, **kw)
+        J = rows[..., n_par:]
+        transition = J @ np.linalg.inv(np.concatenate([J[..., :1, :, :], J[..., :-1, :, :]],
+                                                      axis=-3))
+        prior_mean = np.concatenate([-params, np.zeros((*batch, 4))], axis=-1)
         x, P = recursive_least_squares(rows, los_px - predicted, prior_mean, prior_cov,
                                        image_noise**2, forgetting=forgetting,
-                                       walk_transition=walk_transition, walk_var=walk_var)
+                                       walk_transition=transition, walk_var=walk_var)
         params = params + x[..., :n_par]
+        aim = aim + x[..., n_par:n_par + 2]
         cov = P[..., :n_par, :n_par]
-        step = np.abs(x[..., :n_par]) / np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+        step = np.abs(x[..., :n_par + 2]) / np.sqrt(
+            np.diagonal(P, axis1=-2, axis2=-1)[..., :n_par + 2])
         converged = np.all(step < tol, axis=-1)
         if np.all(converged):
             break
-    predicted = predict_los(t, gyro, eta, eps, params, camera)
-    residual = los_px - predicted
-    residual = residual - residual.mean(axis=-2, keepdims=True)
-    rms = np.sqrt(np.mean(np.sum(residual**2, axis=-1), axis=-1))
+    residual = los_px - predict_los(t, gyro, eta, eps, params, camera, aim, **kw)
+    rms = np.sqrt(np.mean(residual**2, axis=(-2, -1)))
     return Estimate(values=params, covariance=cov, passes=passes, converged=converged,
-                    residual_rms=rms)
+                    residual_rms=rms, aim_px=aim, mount=mount)
 
 
 def estimate_record(record: Record, setup: Setup, **kwargs) -> Estimate:
     """:func:`estimate` on a simulated record with the setup's camera and noise levels."""
+    kwargs = {"mount": setup.mount, "gyro_sampling": setup.gyro_sampling, **kwargs}
     return estimate(record.t, record.gyro, record.eta, record.eps, record.los_px, setup.camera,
                     setup.image_noise, setup.gyro_noise, **kwargs)

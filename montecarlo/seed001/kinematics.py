@@ -20,16 +20,19 @@ matrices printed under seed 001, eq. (1)):
 ``g``  IMU: ``C_b^g = R_y(dgy) R_x(dgx) R_z(dgz)`` (seed 001, eq. (1), here with exact rotations).
 ``p``  gimbal pitch frame: ``C_b^p = R_x(eps) R_z(eta)``; ``eta`` turns about the carrier's z
        (positive: LOS to the left), ``eps`` about the azimuth frame's x (positive: LOS up).
-``c``  camera: ``C_b^c = R_y(dpy) R_x(eps + dpx) R_z(eta + dpz)``. This is seed 001, eq. (2):
-       the camera's pitch and azimuth installation angles add to the gimbal angles. ``dpy``
-       (roll about the LOS), which the patent drops, is applied last; it only turns the image.
-LOS    the camera's y axis. Its direction in the carrier frame is
+``c``  camera, two mounts. ``patent``: ``C_b^c = R_y(dpy) R_x(eps + dpx) R_z(eta + dpz)``, seed
+       001, eq. (2): the camera's pitch and azimuth installation angles add to the gimbal angles.
+       ``dpy`` (roll about the LOS), which the patent drops, is applied last; it only turns the
+       image. ``inner-gimbal`` (camera bolted to the pitch gimbal):
+       ``C_b^c = R_y(dpy) R_x(dpx) R_z(dpz) R_x(eps) R_z(eta)``.
+LOS    the camera's y axis; with the patent mount its direction in the carrier frame is
        ``[-sin(eta+dpz) cos(eps+dpx), cos(eta+dpz) cos(eps+dpx), sin(eps+dpx)]``.
 
 Angular rates are body rates in the rotating frame's own axes (``dC_n^b/dt = -[w_b x] C_n^b``).
 The IMU measures ``w_m = C_b^g w_b + bias + noise`` [rad/s].
 
-Image: the target is the point the LOS aimed at at ``t = 0``; with ``u`` its direction in frame c,
+Image: the target is a fixed direction in n, by default the point the LOS aimed at at ``t = 0``;
+with ``u`` its direction in frame c,
 its image is at ``x_px = k_x u_x / u_y`` (right), ``z_px = k_z u_z / u_y`` (up)
 (:func:`montecarlo.geometry.camera.pixels_from_direction`). ``los_x_px, los_z_px`` are this image
 position: a LOS turned by a small angle ``a`` to the left (about +z) moves the target to
@@ -160,8 +163,37 @@ def measured_rate(omega_b: ArrayLike, delta_g: ArrayLike, bias: ArrayLike = 0.0)
     return matvec(imu_matrix(delta_g), omega_b) + bias  # seed 001, eq. (1)
 
 
-def camera_matrix(eta: ArrayLike, eps: ArrayLike, delta_p: ArrayLike = 0.0) -> FloatArray:
-    """``C_b^c = R_y(dpy) R_x(eps + dpx) R_z(eta + dpz)``, shape (..., 3, 3).
+MOUNTS = ("patent", "inner-gimbal")
+"""Camera mounts: ``patent`` (eq. (2), the installation angles add to the gimbal angles) and
+``inner-gimbal`` (the camera bolted to the pitch gimbal, its installation rotation applied after
+the gimbal's)."""
+
+
+def check_mount(mount: str) -> str:
+    if mount not in MOUNTS:
+        raise ValueError(f"mount must be one of {', '.join(MOUNTS)}, not {mount!r}")
+    return mount
+
+
+def installation_matrix(delta_p: ArrayLike) -> FloatArray:
+    """``R_y(dpy) R_x(dpx) R_z(dpz)``, the inner-gimbal camera's installation rotation.
+
+    Parameters
+    ----------
+    delta_p : array_like, shape (..., 3) [rad]
+        Camera installation angles ``[dpx, dpy, dpz]``.
+    """
+    d = as_vector(delta_p)
+    return mounting_matrix(d[..., 2], d[..., 0], d[..., 1])
+
+
+def camera_matrix(
+    eta: ArrayLike, eps: ArrayLike, delta_p: ArrayLike = 0.0, mount: str = "patent"
+) -> FloatArray:
+    """Camera attitude ``C_b^c``, shape (..., 3, 3).
+
+    ``patent``: ``R_y(dpy) R_x(eps + dpx) R_z(eta + dpz)`` (eq. (2));
+    ``inner-gimbal``: ``R_y(dpy) R_x(dpx) R_z(dpz) R_x(eps) R_z(eta)``.
 
     Parameters
     ----------
@@ -169,12 +201,15 @@ def camera_matrix(eta: ArrayLike, eps: ArrayLike, delta_p: ArrayLike = 0.0) -> F
         Gimbal azimuth and pitch angles.
     delta_p : array_like, shape (..., 3) [rad]
         Camera installation angles ``[dpx, dpy, dpz]``.
+    mount : {"patent", "inner-gimbal"}
 
     References
     ----------
     seed 001, eq. (2) (the rotations it applies to the carrier rate).
     """
     d = as_vector(delta_p)
+    if check_mount(mount) == "inner-gimbal":
+        return np.matmul(installation_matrix(d), mounting_matrix(eta, eps, 0.0))
     return mounting_matrix(np.asarray(eta) + d[..., 2], np.asarray(eps) + d[..., 0], d[..., 1])
 
 
@@ -214,11 +249,14 @@ def camera_rate(
     eta_dot: ArrayLike,
     eps_dot: ArrayLike,
     delta_p: ArrayLike = 0.0,
+    mount: str = "patent",
 ) -> FloatArray:
     """Angular rate of the camera in camera axes, shape (..., 3) [rad/s].
 
-    ``w_i = R_y(dpy) [R_x(eps + dpx) (R_z(eta + dpz) w_b + [0, 0, eta']) + [eps', 0, 0]]``.
-    Components x and z turn the LOS (the stabilisation error rate); y rolls the image.
+    ``patent``: ``w_i = R_y(dpy) [R_x(eps + dpx) (R_z(eta + dpz) w_b + [0, 0, eta']) +
+    [eps', 0, 0]]``; ``inner-gimbal``: ``w_i = R_y(dpy) R_x(dpx) R_z(dpz) [R_x(eps) (R_z(eta)
+    w_b + [0, 0, eta']) + [eps', 0, 0]]``. Components x and z turn the LOS (the stabilisation
+    error rate); y rolls the image.
 
     The patent prints the pitch-rate vector as ``[0 0 eps']``; the pitch axis is x, so it is
     ``[eps' 0 0]`` (only then do the rates of eq. (4) stabilise the LOS).
@@ -228,11 +266,16 @@ def camera_rate(
     seed 001, eqs. (2)-(3).
     """
     d = as_vector(delta_p)
+    inner_mount = check_mount(mount) == "inner-gimbal"
+    turn_eta = 0.0 if inner_mount else d[..., 2]
+    turn_eps = 0.0 if inner_mount else d[..., 0]
     zero = np.zeros_like(np.asarray(eta_dot, float))
-    inner = matvec(mounting_matrix(np.asarray(eta) + d[..., 2], 0.0, 0.0), omega_b)
+    inner = matvec(mounting_matrix(np.asarray(eta) + turn_eta, 0.0, 0.0), omega_b)
     inner = inner + stack_vector(zero, zero, eta_dot)  # seed 001, eqs. (2)-(3)
-    outer = matvec(mounting_matrix(0.0, np.asarray(eps) + d[..., 0], 0.0), inner)
+    outer = matvec(mounting_matrix(0.0, np.asarray(eps) + turn_eps, 0.0), inner)
     outer = outer + stack_vector(eps_dot, zero, zero)  # seed 001, eqs. (2)-(3), pitch rate about x
+    if inner_mount:
+        return matvec(installation_matrix(d), outer)
     return matvec(mounting_matrix(0.0, 0.0, d[..., 1]), outer)
 
 

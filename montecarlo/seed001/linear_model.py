@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
 from montecarlo.geometry.camera import Camera
-from montecarlo.seed001.kinematics import as_vector, stack_vector
+from montecarlo.seed001.kinematics import as_vector, check_mount, stack_vector
 from montecarlo.seed001.simulate import Record
 
 FloatArray = NDArray[np.float64]
@@ -27,17 +27,28 @@ FloatArray = NDArray[np.float64]
 
 OBSERVABLE_NAMES = ("delta_px", "delta_gx", "delta_gy", "delta_z")
 """The four estimable combinations ``X`` of seed 001, eq. (6); ``delta_z = dpz - dgz``."""
+
+INNER_GIMBAL_NAMES = (*OBSERVABLE_NAMES, "delta_gz")
+"""``X`` of the inner-gimbal mount: ``dpz`` and ``dgz`` enter separately
+(``dpz = delta_z + dgz``)."""
+
+
+def model_names(mount: str = "patent") -> tuple[str, ...]:
+    """The installation-angle columns of the first-order model of a camera mount."""
+    return INNER_GIMBAL_NAMES if check_mount(mount) == "inner-gimbal" else OBSERVABLE_NAMES
 # --------------------------------------------------------------------------------------------
 # Linearised measurement model
 # --------------------------------------------------------------------------------------------
 
 
-def los_rate_matrix(omega: ArrayLike, eta: ArrayLike, eps: ArrayLike) -> FloatArray:
+def los_rate_matrix(
+    omega: ArrayLike, eta: ArrayLike, eps: ArrayLike, mount: str = "patent"
+) -> FloatArray:
     """First-order LOS error rate per unit installation angle, derived from the kinematics.
 
-    ``[dw_x, dw_z] = H X`` with ``X = [delta_px, delta_gx, delta_gy, delta_z]`` and
-    ``delta_z = dpz - dgz``; ``dw_x, dw_z`` are the x (pitch) and z (azimuth) components of the
-    camera rate (:func:`camera_rate`), zero without installation angles::
+    ``[dw_x, dw_z] = H X``; ``dw_x, dw_z`` are the x (pitch) and z (azimuth) components of the
+    camera rate (:func:`camera_rate`), zero without installation angles. Patent mount (eq. (2)):
+    ``X = [delta_px, delta_gx, delta_gy, delta_z]`` with ``delta_z = dpz - dgz``::
 
         H = [[0, -s_eta w_z, c_eta w_z, c_eta w_y - s_eta w_x],
              [sec(eps) (s_eta w_x - c_eta w_y), c_eps w_y + s_eps c_eta w_z,
@@ -45,16 +56,27 @@ def los_rate_matrix(omega: ArrayLike, eta: ArrayLike, eps: ArrayLike) -> FloatAr
 
     Row 1 equals the patent's; row 2 differs in ``H_21`` (see :func:`patent_eq6_matrix`).
 
+    Inner-gimbal mount: the pitch frame's error rate is ``C_b^p (dg x w)`` (the loop's rate
+    error ``w_b - w_m = dg x w_b``), and the installation rotation adds ``-dp x [0, w_r, 0]``
+    with ``w_r`` the roll rate (:func:`image_roll_rate`): ``dpz`` enters as ``[w_r, 0]``, not as
+    an azimuth offset. With ``X = [delta_px, delta_gx, delta_gy, delta_z, dgz]`` (``dpz =
+    delta_z + dgz``) the first four columns hold ``dgz`` fixed::
+
+        H = [[0, -s_eta w_z, c_eta w_z, w_r, (1 - c_eps) w_r],
+             [-w_r, c_eps w_y + s_eps c_eta w_z, -c_eps w_x + s_eps s_eta w_z, 0,
+              -s_eps (c_eta w_x + s_eta w_y)]]
+
     Parameters
     ----------
     omega : array_like, shape (..., 3) [rad/s]
         Carrier rate (the measured rate may be used: the difference is of second order).
     eta, eps : array_like [rad]
         Gimbal angles.
+    mount : {"patent", "inner-gimbal"}
 
     Returns
     -------
-    ndarray, shape (..., 2, 4) [rad/s per rad]
+    ndarray, shape (..., 2, 4) (patent) or (..., 2, 5) (inner-gimbal) [rad/s per rad]
 
     References
     ----------
@@ -64,6 +86,12 @@ def los_rate_matrix(omega: ArrayLike, eta: ArrayLike, eps: ArrayLike) -> FloatAr
     wx, wy, wz = omega[..., 0], omega[..., 1], omega[..., 2]
     ce, se, ca, sa = np.cos(eps), np.sin(eps), np.cos(eta), np.sin(eta)
     zero = np.zeros_like(wx * ce * ca)
+    if check_mount(mount) == "inner-gimbal":
+        roll = (ca * wy - sa * wx) / ce
+        row_x = stack_vector(zero, -sa * wz, ca * wz, roll, (1.0 - ce) * roll)
+        row_z = stack_vector(-roll, ce * wy + se * ca * wz, -ce * wx + se * sa * wz, zero,
+                             -se * (ca * wx + sa * wy))
+        return np.stack([row_x, row_z], axis=-2)
     row_x = stack_vector(zero, -sa * wz, ca * wz, ca * wy - sa * wx)  # seed 001, eq. (6), row 1
     row_z = stack_vector((sa * wx - ca * wy) / ce, ce * wy + se * ca * wz,  # derived, cf. eq. (6)
                          -ce * wx + se * sa * wz, se * (ca * wx + sa * wy))
@@ -169,6 +197,7 @@ def drift_matrix(
     eps: ArrayLike,
     camera: Camera,
     rate_matrix=None,
+    mount: str = "patent",
 ) -> FloatArray:
     """First-order image drift of the target per unit parameter, from the rate model.
 
@@ -186,19 +215,19 @@ def drift_matrix(
     eta, eps : array_like, shape (..., N) [rad]
     camera : Camera
     rate_matrix : callable, optional
-        ``H(omega, eta, eps)`` of the rate model; :func:`los_rate_matrix` if omitted
-        (:func:`patent_eq6_matrix` to see what the printed model would give).
+        ``H(omega, eta, eps)`` of the rate model; :func:`los_rate_matrix` of ``mount`` if
+        omitted (:func:`patent_eq6_matrix` to see what the printed model would give).
+    mount : {"patent", "inner-gimbal"}
 
     Returns
     -------
-    ndarray, shape (..., N, 2, 7) [px per rad, px per rad/s]
-        Columns ``[delta_px, delta_gx, delta_gy, delta_z, bias_x, bias_y, bias_z]``;
-        rows ``[x_px, z_px]``.
+    ndarray, shape (..., N, 2, 7 or 8) [px per rad, px per rad/s]
+        Columns ``[*model_names(mount), bias_x, bias_y, bias_z]``; rows ``[x_px, z_px]``.
     """
     t = np.asarray(t, float)
     gyro = np.asarray(gyro, float)
     eta, eps = np.asarray(eta, float), np.asarray(eps, float)
-    H = (rate_matrix or los_rate_matrix)(gyro, eta, eps)
+    H = rate_matrix(gyro, eta, eps) if rate_matrix else los_rate_matrix(gyro, eta, eps, mount)
     rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
     integrand = np.matmul(plane_rotation(-rho), rate)
@@ -215,6 +244,9 @@ RAW_TO_OBSERVABLE = np.array([
 ])
 """``X = T [dpx, dpz, dgx, dgy, dgz]``: the patent's five angles to the four combinations."""
 
+RAW_TO_INNER_GIMBAL = np.array([*RAW_TO_OBSERVABLE, [0.0, 0.0, 0.0, 0.0, 1.0]])
+"""The same for the inner-gimbal mount's ``X = [delta_px, delta_gx, delta_gy, delta_z, dgz]``."""
+
 
 RANK_TOLERANCE = 1e-6
 """Singular values (and unexplained column norms) below this fraction of the largest column
@@ -228,15 +260,16 @@ class Observability:
     Attributes
     ----------
     rank : int
-        Numerical rank for ``X`` (4 when every combination is seen).
+        Numerical rank for ``X`` (4, or 5 for the inner-gimbal mount, when every column is
+        seen).
     raw_rank : int
         Rank for the patent's five angles ``[dpx, dpz, dgx, dgy, dgz]``: at most 4, since
         ``dpz`` and ``dgz`` enter only as ``delta_z = dpz - dgz``.
     raw_null_space : ndarray, shape (5 - raw_rank, 5)
         Orthonormal directions of the five angles that the data cannot see (for rank 4 the
         single row ``[0, 1, 0, 0, 1] / sqrt(2)``: equal changes of ``dpz`` and ``dgz``).
-    sigma : ndarray, shape (4,) [rad]
-        Cramer-Rao standard deviation of each combination from image noise alone, the others
+    sigma : ndarray, shape (4,) or (5,) [rad]
+        Cramer-Rao standard deviation of each column of ``X`` from image noise alone, the others
         and the nuisance parameters being estimated too; ``inf`` where a combination is not
         seen independently of the others.
     """
@@ -248,7 +281,8 @@ class Observability:
 
 
 def observability(
-    record: Record, camera: Camera, image_noise: float, *, nuisance: bool = True
+    record: Record, camera: Camera, image_noise: float, *, nuisance: bool = True,
+    mount: str = "patent",
 ) -> Observability:
     """Rank, singular values and Cramer-Rao bounds of the stacked first-order drift model.
 
@@ -261,21 +295,26 @@ def observability(
     nuisance : bool
         Estimate the gyro biases and the image offset of the target beside ``X`` (as
         :func:`montecarlo.seed001.estimate.estimate` does); False: known.
+    mount : {"patent", "inner-gimbal"}
+        ``X`` has the columns of :func:`model_names`.
     """
-    M = drift_matrix(record.t, record.gyro, record.eta, record.eps, camera) / image_noise
-    X = M[..., :4].reshape(-1, 4)
+    n_x = len(model_names(mount))
+    M = drift_matrix(record.t, record.gyro, record.eta, record.eps, camera,
+                     mount=mount) / image_noise
+    X = M[..., :n_x].reshape(-1, n_x)
     if nuisance:
         offset = np.broadcast_to(np.eye(2) / image_noise, (record.t.size, 2, 2))
-        Q = np.linalg.qr(np.concatenate([M[..., 4:], offset], -1).reshape(-1, 5))[0]
+        Q = np.linalg.qr(np.concatenate([M[..., n_x:], offset], -1).reshape(-1, 5))[0]
         X = X - Q @ (Q.T @ X)
     s = np.linalg.svd(X, compute_uv=False)
     tol = RANK_TOLERANCE * np.linalg.norm(X, axis=0).max()
-    _, raw_s, V = np.linalg.svd(X @ RAW_TO_OBSERVABLE, full_matrices=False)
+    raw = RAW_TO_INNER_GIMBAL if n_x == 5 else RAW_TO_OBSERVABLE
+    _, raw_s, V = np.linalg.svd(X @ raw, full_matrices=False)
     raw_rank = int(np.sum(raw_s > tol))
     null = V[raw_rank:]
     null = null * np.sign(null[np.arange(len(null)), np.argmax(np.abs(null), axis=1)])[:, None]
-    sigma = np.empty(4)
-    for j in range(4):
+    sigma = np.empty(n_x)
+    for j in range(n_x):
         others = np.delete(X, j, axis=1)
         residual = X[:, j] - others @ np.linalg.lstsq(others, X[:, j], rcond=None)[0]
         norm = np.linalg.norm(residual)

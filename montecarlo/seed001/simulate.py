@@ -24,6 +24,7 @@ from montecarlo.seed001.kinematics import (
     as_vector,
     batch_shape,
     camera_matrix,
+    check_mount,
     gimbal_rates,
     matvec,
     measured_rate,
@@ -34,6 +35,21 @@ FloatArray = NDArray[np.float64]
 
 DEFAULT_CAMERA = Camera.from_degrees(5.0, 5.0, 1024, 1024)
 """A narrow-field camera: 5 x 5 deg, 1024 x 1024 pixels (about 85 urad per pixel)."""
+
+GYRO_SAMPLINGS = ("point", "interval-mean")
+"""What a gyro row holds: the rate at its time stamp (``point``), or the mean rate over the
+sample interval ending at its time stamp (``interval-mean``: the IMU's delta-angle divided by
+the interval)."""
+
+QUADRATURE = np.polynomial.legendre.leggauss(5)
+"""Gauss-Legendre nodes and weights on [-1, 1] for the interval means of the simulated rate."""
+
+
+def check_sampling(sampling: str) -> str:
+    if sampling not in GYRO_SAMPLINGS:
+        raise ValueError(f"gyro sampling must be one of {', '.join(GYRO_SAMPLINGS)}, "
+                         f"not {sampling!r}")
+    return sampling
 # --------------------------------------------------------------------------------------------
 # Simulation
 # --------------------------------------------------------------------------------------------
@@ -56,6 +72,13 @@ class Setup:
         Standard deviation of the target's image position, per axis and frame.
     gyro_noise : float [rad/s/sqrt(Hz)]
         White-noise density of each gyro axis; per-sample std ``gyro_noise * sqrt(rate)``.
+    target_px : (float, float) [px]
+        Image position ``(x, z)`` of the target at ``t = 0`` (``(0, 0)``: the target is where
+        the LOS aims at the start).
+    mount : {"patent", "inner-gimbal"}
+        Camera mount (:func:`montecarlo.seed001.kinematics.camera_matrix`).
+    gyro_sampling : {"point", "interval-mean"}
+        What a gyro row holds (:data:`GYRO_SAMPLINGS`).
     """
 
     duration: float = 60.0
@@ -65,6 +88,13 @@ class Setup:
     camera: Camera = DEFAULT_CAMERA
     image_noise: float = 0.1
     gyro_noise: float = 0.0
+    target_px: tuple[float, float] = (0.0, 0.0)
+    mount: str = "patent"
+    gyro_sampling: str = "point"
+
+    def __post_init__(self) -> None:
+        check_mount(self.mount)
+        check_sampling(self.gyro_sampling)
 
     @property
     def times(self) -> FloatArray:
@@ -77,19 +107,78 @@ class Setup:
 class Compensation:
     """Installation angles and gyro bias the stabilisation loop corrects for.
 
-    The loop uses ``w_c = (R_y(dgy) R_x(dgx))^T (w_m - bias)`` as the carrier rate and evaluates
-    eq. (4) at ``(eta + delta_z, eps + delta_px)``. Only ``delta_z = dpz - dgz`` is needed: the
-    carrier frame turned by ``dgz`` about z makes the compensated loop exact.
+    The loop uses ``w_c = (R_y(dgy) R_x(dgx))^T (w_m - bias)`` as the carrier rate, the rate of
+    the carrier frame turned by ``dgz`` about z. Patent mount: it evaluates eq. (4) at
+    ``(eta + delta_z, eps + delta_px)``; only ``delta_z = dpz - dgz`` is needed. Inner-gimbal
+    mount: it integrates eq. (4) for the camera's LOS (:func:`pointing_angles`) and sets the
+    encoder angles that put the camera's LOS there (:func:`encoder_angles`).
 
     Parameters
     ----------
     angles : array_like, shape (..., 4) [rad]
         ``[delta_px, delta_gx, delta_gy, delta_z]``.
     gyro_bias : array_like, shape (..., 3) [rad/s]
+    delta_gz : array_like, shape (...) [rad]
+        Used by the inner-gimbal mount only (``dpz = delta_z + dgz``).
+    mount : {"patent", "inner-gimbal"}
     """
 
     angles: ArrayLike
     gyro_bias: ArrayLike = 0.0
+    delta_gz: ArrayLike = 0.0
+    mount: str = "patent"
+
+
+def _inner_gimbal_los(angles: ArrayLike, delta_gz: ArrayLike) -> FloatArray:
+    """LOS of an inner-gimbal camera in its pitch frame, ``(R_x(dpx) R_z(dpz))^T e_y``."""
+    a = np.asarray(angles, float)
+    M = mounting_matrix(a[..., 3] + np.asarray(delta_gz, float), a[..., 0], 0.0)
+    return M[..., 1, :]
+
+
+def pointing_angles(
+    eta: ArrayLike, eps: ArrayLike, angles: ArrayLike, delta_gz: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Azimuth and pitch of an inner-gimbal camera's LOS in the carrier frame turned by ``dgz``.
+
+    Parameters
+    ----------
+    eta, eps : array_like [rad]
+        Encoder angles.
+    angles : array_like, shape (..., 4) [rad]
+        ``[delta_px, delta_gx, delta_gy, delta_z]``.
+    delta_gz : array_like [rad]
+
+    Returns
+    -------
+    eta_los, eps_los : ndarray [rad]
+        ``los_direction(eta_los, eps_los)`` is the camera's LOS.
+    """
+    m = _inner_gimbal_los(angles, delta_gz)
+    pitch = np.swapaxes(mounting_matrix(np.asarray(eta) - np.asarray(delta_gz), eps, 0.0),
+                        -1, -2)
+    los = matvec(pitch, m)
+    return np.arctan2(-los[..., 0], los[..., 1]), np.arcsin(np.clip(los[..., 2], -1.0, 1.0))
+
+
+def encoder_angles(
+    eta_los: ArrayLike, eps_los: ArrayLike, angles: ArrayLike, delta_gz: ArrayLike,
+    eta_near: ArrayLike = 0.0,
+) -> tuple[FloatArray, FloatArray]:
+    """Encoder angles that put an inner-gimbal camera's LOS at ``(eta_los, eps_los)``.
+
+    The inverse of :func:`pointing_angles`: with ``m`` the LOS in the pitch frame,
+    ``m_y sin(eps) + m_z cos(eps)`` is the LOS's z component, which gives ``eps``; the azimuth
+    then turns ``[m_x, m_y cos(eps) - m_z sin(eps)]`` onto the LOS's horizontal part. ``eta`` is
+    taken within pi of ``eta_near``.
+    """
+    m = np.moveaxis(_inner_gimbal_los(angles, delta_gz), -1, 0)[..., None]
+    eps = np.arcsin(np.sin(eps_los) / np.hypot(m[1], m[2])) - np.arctan2(m[2], m[1])
+    q = m[1] * np.cos(eps) - m[2] * np.sin(eps)
+    eta = (np.arctan2(np.cos(eps_los) * np.cos(eta_los), -np.cos(eps_los) * np.sin(eta_los))
+           - np.arctan2(q, m[0]) + np.asarray(delta_gz, float)[..., None])
+    eta = eta_near + np.angle(np.exp(1j * (eta - eta_near)))
+    return eta, eps
 
 
 @dataclass(frozen=True)
@@ -108,7 +197,7 @@ class Record:
     los_px_true : ndarray, shape (..., N, 2) [px], or None for measured data
         The same without image noise.
     los_error : ndarray, shape (..., N) [rad], or None for measured data
-        True angle between the LOS and the target direction (the stabilisation error).
+        True angle between the LOS and its direction at ``t = 0`` (the stabilisation error).
     """
 
     t: FloatArray
@@ -187,7 +276,9 @@ def simulate(
     ``w_m = C_b^g w_b + bias + n`` (eq. (1)); ``n`` is white, held constant over each sample
     interval. The gimbal integrates eq. (4) from ``w_m`` (or from the compensated rate) by
     Runge-Kutta at the sample rate, starting at ``(aim_azimuth, aim_pitch)``. The camera, turned
-    by ``delta_p`` (eq. (2)), images the target it aimed at at ``t = 0``.
+    by ``delta_p`` (eq. (2), or the inner-gimbal mount of ``setup.mount``), images a fixed
+    target whose image at ``t = 0`` is at ``setup.target_px``. The gyro rows hold the rate at
+    their time stamps or its means over the intervals ending there (``setup.gyro_sampling``).
 
     Parameters
     ----------
@@ -240,18 +331,75 @@ def simulate(
     stages = np.stack([loop_rate[..., 0:-1:2, :], loop_rate[..., 1::2, :],
                        loop_rate[..., 2::2, :]], axis=-2)
     stages = stages + loop_noise[..., :-1, None, :]  # white noise held over each interval
-    eta, eps = integrate_gimbal(t, stages, setup.aim_azimuth, setup.aim_pitch,
-                                offset_eta, offset_eps)
+    if compensation is not None and compensation.mount == "inner-gimbal":
+        dgz = np.asarray(compensation.delta_gz, float)
+        start = pointing_angles(setup.aim_azimuth, setup.aim_pitch, angles, dgz)
+        eta_los, eps_los = integrate_gimbal(t, stages, *start)
+        eta, eps = encoder_angles(eta_los, eps_los, angles, dgz, setup.aim_azimuth)
+    else:
+        eta, eps = integrate_gimbal(t, stages, setup.aim_azimuth, setup.aim_pitch,
+                                    offset_eta, offset_eps)
 
     # camera attitude, target and its image
     C_nb = rocking.attitude(t)
-    C_nc = np.matmul(camera_matrix(eta, eps, delta_p[..., None, :]), C_nb)  # seed 001, eq. (2)
-    target = C_nc[..., 0, 1, :]  # LOS at t = 0 in frame n: row y of C_n^c
+    C_nc = np.matmul(camera_matrix(eta, eps, delta_p[..., None, :], setup.mount),
+                     C_nb)  # seed 001, eq. (2)
+    target = target_direction(C_nc[..., 0, :, :], setup.target_px, setup.camera)
     u = matvec(C_nc, target[..., None, :])
     x_px, z_px = pixels_from_direction(u, setup.camera)
     los_true = np.stack([x_px, z_px], axis=-1)
     los = los_true + setup.image_noise * rng.standard_normal(los_true.shape)
-    los_error = np.arctan2(np.hypot(u[..., 0], u[..., 2]), u[..., 1])
-    gyro = omega_m[..., 0::2, :] + noise
+    v = matvec(C_nc, C_nc[..., 0:1, 1, :])  # the LOS at t = 0 (row y of C_n^c) in frame c
+    los_error = np.arctan2(np.hypot(v[..., 0], v[..., 2]), v[..., 1])
+    if setup.gyro_sampling == "point":
+        gyro = omega_m[..., 0::2, :] + noise
+    else:  # the mean over (t_k - h, t_k], with the noise the loop used over that interval
+        first = setup.gyro_noise * np.sqrt(setup.rate) * rng.standard_normal((*batch, 1, 3))
+        gyro = interval_mean_rate(rocking, t, h, delta_g, bias) + np.concatenate(
+            [first, noise[..., :-1, :]], axis=-2)
     return Record(t=t, gyro=gyro, eta=eta, eps=eps, los_px=los,
                   los_px_true=los_true, los_error=los_error)
+
+
+def target_direction(C_nc0: ArrayLike, target_px: ArrayLike, camera: Camera) -> FloatArray:
+    """Direction in frame n of a target imaged at ``target_px = (x, z)`` by a camera at ``C_nc0``.
+
+    Parameters
+    ----------
+    C_nc0 : array_like, shape (..., 3, 3)
+        Camera attitude ``C_n^c`` when the target is at ``target_px``.
+    target_px : array_like, shape (..., 2) [px]
+    camera : Camera
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Unit vector; the inverse of the pinhole ``x = k_x u_x / u_y``, ``z = k_z u_z / u_y``.
+    """
+    px = np.asarray(target_px, float)
+    u = np.stack(np.broadcast_arrays(px[..., 0] / float(camera.k_x), np.ones(px.shape[:-1]),
+                                     px[..., 1] / float(camera.k_z)), axis=-1)
+    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    return matvec(np.swapaxes(np.asarray(C_nc0, float), -1, -2), u)
+
+
+def interval_mean_rate(
+    rocking: Rocking, t: ArrayLike, h: float, delta_g: ArrayLike, bias: ArrayLike = 0.0
+) -> FloatArray:
+    """Noise-free IMU output averaged over ``(t_k - h, t_k]``, shape (..., N, 3) [rad/s].
+
+    The delta-angle of eq. (1)'s rate over the interval divided by ``h`` (Gauss-Legendre,
+    :data:`QUADRATURE`).
+
+    References
+    ----------
+    seed 001, eq. (1).
+    """
+    t = np.asarray(t, float)
+    x, w = QUADRATURE
+    nodes = t[:, None] - 0.5 * h + 0.5 * h * x
+    omega_b = rocking.body_rate(nodes.ravel())
+    omega_m = measured_rate(omega_b, as_vector(delta_g)[..., None, :],
+                            as_vector(bias)[..., None, :])  # seed 001, eq. (1)
+    omega_m = omega_m.reshape(*omega_m.shape[:-2], t.size, x.size, 3)
+    return np.einsum("...gj,g->...j", omega_m, 0.5 * w)
