@@ -45,7 +45,7 @@ def test_scenarios_cover_every_testable_effect():
     labels = [s["label"] for s in acc.scenarios("ground")]
     assert labels[0] == "null"
     assert {"radial_distortion", "focal_scale", "drift", "lever_arm"} <= set(labels)
-    assert not {"refraction", "earth_curvature", "detector_rotation"} & set(labels)
+    assert not {"refraction", "detector_rotation"} & set(labels)
     labels = [s["label"] for s in acc.scenarios("collimation")]
     assert "paper" in labels and "paper+theodolite_collimation" not in labels
 
@@ -59,7 +59,7 @@ def test_full_acceptance(system):
     assert null.trials >= 500
     assert null.named_any <= 0.05
     if system == "ground":
-        assert (table.named_watched == 0).all()  # refraction, curvature never named
+        assert (table.named_watched == 0).all()  # refraction never named
     for r in table[table.scenario != "null"].itertuples():
         assert r.named_or_group >= 0.90, r.scenario
         assert r.within_2sigma >= 0.90, r.scenario

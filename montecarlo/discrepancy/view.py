@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,8 @@ class SystemView:
         (``discrepancy_ground``, ``discrepancy_collimation``).
     study_params : the ``run_trials`` parameters (SI) of that system for a fit's model.
     shift_unit : parameter -> (unit, size in SI) for small changes of it (influences).
+    base_physics : known physics in the base model, fixed, not fitted (ground: earth
+        curvature and the standard coefficient of refraction).
     """
 
     system: str
@@ -51,6 +53,7 @@ class SystemView:
     study_system: str
     study_params: Callable[[LeastSquaresFit], dict[str, Any]]
     shift_unit: Callable[[str], tuple[str, float]] | None = None
+    base_physics: Mapping[str, Any] = field(default_factory=dict)
 
     def unit(self, name: str) -> tuple[str, float]:
         """Display unit of a parameter; an observation's shift is in sigma."""
@@ -155,6 +158,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "largest_residuals": largest_residuals(d, view),
         "gap": {"before": _gap(view, d.before), "after": _gap(view, d.after)},
         "rms_unit": view.rms_unit,
+        "base_physics": dict(view.base_physics),
         "alpha": d.alpha,
         "chi2_red_band_99": {"before": chi2_red_band(d.before.dof),
                              "after": chi2_red_band(d.after.dof)},
@@ -183,6 +187,10 @@ def format_text(report: Mapping[str, Any]) -> str:
     b, a = g["before"], g["after"]
     lines.append(f"base model: chi2_red = {b['chi2_red']:.3f} (dof {b['dof']}), "
                  f"p = {_p(b['p_value'])}, rms = {b['rms']:.4g} {unit}")
+    physics = report.get("base_physics", {})
+    if physics:
+        lines.append("known physics in the base model: " + ", ".join(
+            k.replace("_", " ") + ("" if v is True else f" = {v:g}") for k, v in physics.items()))
     if not report["detected"]:
         lines.append("global test passes: no missing effect")
     for e in report["named_effects"]:
