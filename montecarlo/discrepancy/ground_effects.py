@@ -100,6 +100,25 @@ _CANDIDATES = (
                "mounting angles + w (t_s - mean t_s) [rad/s]", (1.0, 1.0, 1.0)),
 )
 
+_SECOND_STATION = ("the projection centre surveyed, or the targets seen from a second sensor "
+                   "position: a lever arm is minus a common shift of all targets")
+SEPARATING_DATA = {
+    **{frozenset(("lever_arm", bias)): _SECOND_STATION
+       for bias in ("target_range_bias", "target_lateral_bias", "target_height_bias")},
+    **{frozenset((a, b)): "targets at a second range"
+       for a, b in (("focal_scale", "target_range_bias"), ("focal_scale", "lever_arm"),
+                    ("principal_point", "target_lateral_bias"),
+                    ("principal_point", "target_height_bias"), ("principal_point", "lever_arm"),
+                    ("refraction", "target_height_scale"), ("refraction", "target_height_bias"))},
+    frozenset(("target_height_scale", "target_height_bias")): "targets at more than one height",
+    frozenset(("radial_distortion", "focal_scale")): "targets nearer the edge of the field",
+    frozenset(("drift", "session_shift")): "observations spread over each session",
+}
+"""Pair of ground candidates -> the extra data that would tell them apart. A shift ``b`` of a
+target at range ``y`` moves its image by ``b / y``, a scale or a principal point does not
+depend on range; a height scale moves a target by ``s_h z``, a height bias by ``b_z``;
+refraction grows as ``d^2``; distortion as ``r^3``, a focal scale as ``r``."""
+
 SESSION_SHIFT_BOUND = 0.05
 """Physical bound of a session's shift of each mounting angle [rad]."""
 
@@ -312,7 +331,7 @@ def ground_problem(data: GroundData, camera: Camera, pixel_sigma: float,
 
     candidates, unavailable = candidates_for(data)
     return Problem("ground", BASE, candidates, residuals, start, unavailable,
-                   observations(data))
+                   observations(data), SEPARATING_DATA)
 
 
 def observations(data: GroundData) -> tuple[tuple[str, int, tuple[int, ...]], ...]:

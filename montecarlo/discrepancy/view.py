@@ -110,6 +110,30 @@ def largest_residuals(d: Diagnosis, view: SystemView, k: int = 5) -> list[dict[s
     return out
 
 
+GENERIC_SEPARATION = "data on which their signatures differ"
+"""What separates two members of a group when the problem does not say."""
+
+
+def _groups(d: Diagnosis, view: SystemView) -> list[dict[str, Any]]:
+    """Each confounded group of two or more: its members, the member fitted (the minimal
+    parametrisation) with its parameters, and what it cannot separate and which data would."""
+    out = []
+    for g in d.confounded:
+        if len(g.members) < 2:
+            continue
+        params = {p: d.after.params[p] for p in d.problem.effect(g.fitted).parameters
+                  if p in d.after.params}
+        out.append({"members": list(g.members), "fitted": g.fitted,
+                    "parameters": _show(view, params),
+                    "stderr": _show(view, {p: d.after.stderr[p] for p in params}),
+                    "units": {k: view.unit(k)[0] for k in params},
+                    "cannot_separate": [
+                        {"member": m, "from": g.fitted, "correlation": g.correlation[m],
+                         "separating_data": g.separating_data.get(m) or GENERIC_SEPARATION}
+                        for m in g.members[1:]]})
+    return out
+
+
 def _gap(view: SystemView, fit: LeastSquaresFit) -> dict[str, float]:
     return {"chi2_red": fit.chi2_red, "rms": residual_rms(view, fit), "p_value": fit.p_value,
             "chi2": fit.chi2, "dof": fit.dof}
@@ -150,6 +174,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "unexplained": d.unexplained,
         "named_effects": named,
         "confounded_groups": [list(g) for g in d.groups if len(g) > 1],
+        "groups": _groups(d, view),
         "absorbed": d.absorbed,
         "outliers": _outliers(d, view),
         "dropped_effects": [{"name": n, "p_value": p} for n, p in d.dropped.items()],
@@ -198,9 +223,15 @@ def format_text(report: Mapping[str, Any]) -> str:
                            for k, v in e["parameters"].items())
         lines.append(f"named: {e['name']} ({values}); identification p = "
                      f"{_p(e['p_value'])} (Holm), T = {e['statistic']:.1f} on {e['dof']} dof")
-    for group in report["confounded_groups"]:
-        lines.append(f"confounded group (the data cannot tell these apart): "
-                     f"{', '.join(group)}")
+    for g in report.get("groups", []):
+        values = ", ".join(f"{k} = {v:.4g} ± {g['stderr'][k]:.2g}{_unit(g['units'][k])}"
+                           for k, v in g["parameters"].items())
+        lines.append(f"group [{', '.join(g['members'])}]: fitted as {g['fitted']} ({values}), "
+                     "its minimal parametrisation")
+        for c in g["cannot_separate"]:
+            lines.append(f"  cannot separate {c['member']} from {c['from']} (correlation "
+                         f"{c['correlation']:.3f}); would separate them: "
+                         f"{c['separating_data']}")
     for o in report["outliers"]:
         size = ", ".join(f"{k} {v:+.3g}" for k, v in o["size"].items())
         lines.append(f"outlier: observation {o['id']} (row {o['observation']}): {size} "
