@@ -22,7 +22,10 @@ snooping, Teunissen's DIA):
    p-value is the winner if Holm rejects it. Candidates whose statistics correlate with the
    winner's above ``confounded`` (0.9, the largest canonical correlation of the projected
    column spaces) form a *confounded group* with it unless the data separate them (the
-   partner, fitted instead, leaves a significant signal in the winner's columns).
+   partner, fitted instead, leaves a significant signal in the winner's columns). A candidate
+   inside the winner's column space with fewer parameters that explains its signal (alone or
+   with one other candidate) is adapted instead: the group's minimal parametrisation
+   (:func:`minimal_member`); the groups reported are those of the final model.
 4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2.
 
 The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the whole chain
