@@ -127,3 +127,31 @@ def test_synth_rejects_unknown_effects(capsys, tmp_path):
                  "axis_misalignment=1"]) == 2
     assert "needs 2 finite value(s)" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+
+
+LONG = ["--fov-deg", "30", "22.5", "--pixels", "1920", "1440", "--pixel-sigma-px", "0.2",
+        "--survey-sigma-m", "0.005"]
+
+
+def test_refraction_differs_from_the_stated_standard(tmp_path, capsys):
+    """Targets at 0.5-3 km seen through k = 2: against the standard 0.13 the refraction
+    candidate is named with dk near 2 - 0.13; told k = 2, the base model fits (curvature is
+    in the base model in both cases, so no negative refraction stands in for it)."""
+    data, out = tmp_path / "far.csv", tmp_path / "d.json"
+    assert main(["synth", "ground", str(data), "--seed", "3", *LONG, "--ranges-m", "500",
+                 "1000", "2000", "3000", "--mounting-deg", "-20", "10", "-5",
+                 "--refraction-k", "2"]) == 0
+    assert main(["diagnose", "ground", str(data), *LONG, "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["base_physics"] == {"earth_curvature": True, "refraction_k": 0.13}
+    assert [e["name"] for e in report["named_effects"]] == ["refraction"]
+    dk, err = (report["named_effects"][0][k]["dk"] for k in ("parameters", "stderr"))
+    assert abs(dk - 1.87) < 3 * err
+    assert main(["diagnose", "ground", str(data), *LONG, "--refraction-k", "2",
+                 "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["named_effects"] == [] and report["gap"]["before"]["p_value"] > 0.01
+    capsys.readouterr()
+    assert main(["diagnose", "ground", str(data), *LONG, "--refraction-k", "9"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--refraction-k" in err and "'9'" in err

@@ -1,5 +1,6 @@
 """Ground forward model with candidate effects, checked against independent routes."""
 
+import json
 import math
 
 import numpy as np
@@ -28,8 +29,8 @@ def read_ground_checked(path):
     return data
 
 
-def predict(params, layout=LAYOUT, camera=CAM):
-    return ge.predict_pixels({**MOUNT, **params}, layout, camera)
+def predict(params, layout=LAYOUT, camera=CAM, refraction=ge.STANDARD_REFRACTION):
+    return ge.predict_pixels({**MOUNT, **params}, layout, camera, refraction)
 
 
 def moved(layout, positions):
@@ -37,11 +38,14 @@ def moved(layout, positions):
 
 
 def test_base_model_equals_seed000_trigonometric_route():
-    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (seed000.ground)."""
+    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (seed000.ground).
+
+    Seed 000 has a flat earth and straight rays: k = 1 (a ray bent like the earth) cancels
+    the curvature exactly."""
     C = Rotation.from_euler("ZXY", [MOUNT["psi"], MOUNT["theta"], MOUNT["gamma"]]).as_matrix().T
     expected, flags = ground.observe_target(C, LAYOUT.positions, CAM)
     assert not flags.any()
-    np.testing.assert_allclose(predict({}), expected, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(predict({}, refraction=1.0), expected, rtol=1e-12, atol=1e-9)
 
 
 def test_layout_is_spread_over_the_field_at_two_ranges():
@@ -106,14 +110,31 @@ def test_target_effects_move_the_targets():
                                predict({"b_x": -0.1, "b_y": 0.2, "b_z": -0.3}), rtol=1e-12)
 
 
-def test_refraction_and_curvature_at_physical_magnitudes():
-    """Apparent height - (1 - k) d^2 / (2R); at 100 m that is 0.66 mm, ~0.002 px here."""
+def test_curvature_and_standard_refraction_are_in_the_base_model():
+    """Apparent height - (1 - k) d^2 / (2R); at 100 m that is 0.68 mm, ~0.002 px here."""
     d2 = np.sum(LAYOUT.positions[:, :2] ** 2, axis=1)
     drop = (1 - 0.13) * d2 / (2 * 6_371_000.0)
-    expected = predict({}, moved(LAYOUT, LAYOUT.positions - np.outer(drop, [0, 0, 1])))
-    got = predict({"c": 1.0, "k": 0.13})
-    np.testing.assert_allclose(got, expected, rtol=1e-12)
-    assert 1e-4 < np.max(np.abs(got - predict({}))) < 0.01
+    flat = moved(LAYOUT, LAYOUT.positions - np.outer(drop, [0, 0, 1]))
+    got = predict({})
+    np.testing.assert_allclose(got, predict({}, flat, refraction=1.0), rtol=1e-12)
+    assert 1e-4 < np.max(np.abs(got - predict({}, refraction=1.0))) < 0.01
+    # the candidate dk adds to the standard coefficient
+    np.testing.assert_allclose(predict({"dk": 0.4}), predict({}, refraction=0.53), rtol=1e-12)
+
+
+def test_apparent_elevation_change_is_one_minus_k_range_over_2R():
+    """Independent route: a target at range L on the level surface, seen along a ray of
+    curvature k / R, is depressed by the angle (1 - k) L / (2R) to first order; exact circles
+    (earth of radius R, ray of radius R / k) give that angle to 1e-6 relative at 3 km."""
+    R, k, L = 6_371_000.0, 0.13, 3000.0
+    phi = L / R  # geocentric angle to a target on the level surface
+    target = np.array([R * np.sin(phi), R * np.cos(phi) - R])  # sensor at the origin
+    geometric = np.arctan2(target[1], target[0])  # below the horizontal
+    refraction = k * L / (2.0 * R)  # the ray's chord-to-tangent angle, raising the target
+    apparent = geometric + refraction
+    shift = ge.apparent_height_shift(L, k)
+    assert apparent == pytest.approx(shift / L, rel=1e-6)
+    assert shift == pytest.approx(-(1 - k) * L**2 / (2 * R), rel=1e-15)
 
 
 def test_drift_is_linear_in_time_about_the_mean_epoch():
@@ -143,11 +164,13 @@ def test_initial_mounting_recovers_the_truth_from_exact_data():
 
 
 def test_pixel_covariance_propagates_the_survey_error():
-    """J J' from central differences of the pinhole against the target position."""
+    """J J' from central differences of the pinhole (straight rays: k = 1) against the
+    target position."""
     cov = ge.pixel_covariance(LAYOUT, CAM, MOUNT, 0.3, 0.02)
     h = 1e-4
-    J = np.stack([(predict({}, moved(LAYOUT, LAYOUT.positions + h * e))
-                   - predict({}, moved(LAYOUT, LAYOUT.positions - h * e))) / (2 * h)
+    J = np.stack([(predict({}, moved(LAYOUT, LAYOUT.positions + h * e), refraction=1.0)
+                   - predict({}, moved(LAYOUT, LAYOUT.positions - h * e), refraction=1.0))
+                  / (2 * h)
                   for e in np.eye(3)], axis=-1)
     expected = 0.09 * np.eye(2) + 0.0004 * J @ np.swapaxes(J, 1, 2)
     np.testing.assert_allclose(cov, expected, rtol=1e-6)
@@ -164,7 +187,7 @@ def test_what_the_default_layout_can_and_cannot_tell():
     assert tests["detector_rotation"].status == "absorbed"
     assert tests["detector_rotation"].absorbed_by == {"rho": ["gamma"]}
     assert tests["refraction"].status == "undetectable"
-    assert tests["earth_curvature"].status == "undetectable"
+    assert "earth_curvature" not in tests  # known physics: in the base model
     assert tests["session_shift"].status == "unavailable"
     for name in ("radial_distortion", "focal_scale", "principal_point", "drift", "lever_arm"):
         assert tests[name].status == "testable"
@@ -252,6 +275,24 @@ def test_run_trials_contract():
         np.testing.assert_array_equal(out[k], again[k])
     with pytest.raises(ValueError, match="unknown"):
         sd.run_ground_trials({"nope": 1.0}, rng, 1)
+
+
+def test_study_system_and_report_use_the_stated_refraction():
+    """The Monte Carlo gap simulates with the diagnosis's coefficient: data made with k = 2 at
+    0.5-3 km and refitted with k = 2 give chi2_red near 1; with the standard 0.13 they do not."""
+    camera = Camera.from_degrees(30.0, 22.5, 1920, 1440)
+    far = ge.field_layout(camera, MOUNT, (500.0, 1000.0, 2000.0, 3000.0), rng=1)
+    params = {"fov_yaw": camera.fov_yaw, "fov_pitch": camera.fov_pitch, "n_x": 1920,
+              "n_z": 1440, "pixel_sigma": 0.2, "layout": json.dumps(far.layout())}
+    stated = sd.run_ground_trials({**params, "refraction_k": 2.0}, np.random.default_rng(1), 8)
+    assert 0.6 < np.mean(stated["chi2_red"]) < 1.4  # 8 x 69 dof: sd of the mean 0.06
+    standard = sd.run_ground_trials({**params, "dk": 1.87}, np.random.default_rng(1), 8)
+    assert np.mean(standard["chi2_red"]) > 2.0
+    data = ge.simulate(far, camera, MOUNT, 0.2, 0.0, 1, refraction=2.0)
+    view = ge.report_view(data, camera, 0.2, 0.0, refraction=2.0)
+    fit = fit_model(ge.ground_problem(data, camera, 0.2, 0.0, refraction=2.0), ())
+    assert view.study_params(fit)["refraction_k"] == 2.0
+    assert view.base_physics == {"earth_curvature": True, "refraction_k": 2.0}
 
 
 def test_study_file_with_units_at_the_edge(tmp_path):

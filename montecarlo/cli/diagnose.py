@@ -19,6 +19,7 @@ from montecarlo.cli.common import (
     finite,
     nonnegative,
     nonnegative_int,
+    number,
     positive,
     positive_int,
     probability,
@@ -96,11 +97,12 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     ge.check_in_front(data, camera, str(args.data))
     sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
-        d = diagnose(ge.ground_problem(data, camera, sigma, survey), args.alpha)
+        d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
+                     args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey),
-                             str(args.data))
+    return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
+                                                     args.refraction_k), str(args.data))
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
@@ -175,14 +177,15 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
         survey_sigma=args.survey_sigma_m, mounting=mounting, ranges=args.ranges_m,
         grid=tuple(args.grid), spread=args.spread, duration=args.duration_s,
         sessions=args.sessions, effects=effects, at_mdb=at_mdb,
-        atmosphere=not args.no_atmosphere, with_time=not args.no_time)
+        refraction=args.refraction_k, with_time=not args.no_time)
     if data.n < ge.min_targets():
         raise InputError(f"montecarlo synth ground: only {data.n} targets on the detector")
     write_ground_csv(args.out, data)
     if args.truth:
         write_text(args.truth, synth.truth_report(
             "ground", args.seed, truth, ge.display_unit, pixel_sigma=args.pixel_sigma_px,
-            survey_sigma_m=args.survey_sigma_m, dropped_targets=dropped))
+            survey_sigma_m=args.survey_sigma_m, refraction_k=args.refraction_k,
+            dropped_targets=dropped))
     shown = {k: v / ge.display_unit(k)[1] for k, v in truth.items()
              if k not in ("psi", "theta", "gamma") and v != 0.0}
     print(f"wrote {args.out}: {data.n} observations ({dropped} off the detector dropped), "
@@ -225,6 +228,11 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
     return 0
 
 
+def refraction_option(p: argparse.ArgumentParser, text: str) -> None:
+    p.add_argument("--refraction-k", type=number(float, low=-5.0, high=5.0), default=0.13,
+                   metavar="K", help=f"{text} [1] (default 0.13, Gauss's standard value)")
+
+
 def add_commands(sub: argparse._SubParsersAction) -> None:
     diag = sub.add_parser("diagnose", help="detect, identify and adapt a missing effect in "
                           "measured data")
@@ -252,6 +260,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="standard deviation of each image coordinate [px]")
     p.add_argument("--survey-sigma-m", type=nonnegative, default=0.0, metavar="S",
                    help="standard deviation of each surveyed coordinate [m] (default 0)")
+    refraction_option(p, "standard coefficient of refraction of the base model, which also "
+                      "has earth curvature")
     common(p)
     p.set_defaults(func=_cmd_diagnose_ground)
 
@@ -314,8 +324,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration-s", type=nonnegative, default=3600.0)
     p.add_argument("--sessions", type=positive_int, default=1,
                    help="observe the layout in this many sessions (session column if > 1)")
-    p.add_argument("--no-atmosphere", action="store_true",
-                   help="no earth curvature and refraction (default: physical c = 1, k = 0.13)")
+    refraction_option(p, "coefficient of refraction of the data, which also have earth "
+                      "curvature; --effect refraction=DK adds DK")
     p.add_argument("--no-time", action="store_true", help="omit the t_s column")
     p.set_defaults(func=_cmd_synth_ground)
 

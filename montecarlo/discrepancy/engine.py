@@ -22,7 +22,10 @@ snooping, Teunissen's DIA):
    p-value is the winner if Holm rejects it. Candidates whose statistics correlate with the
    winner's above ``confounded`` (0.9, the largest canonical correlation of the projected
    column spaces) form a *confounded group* with it unless the data separate them (the
-   partner, fitted instead, leaves a significant signal in the winner's columns).
+   partner, fitted instead, leaves a significant signal in the winner's columns). A candidate
+   inside the winner's column space with fewer parameters that explains its signal (alone or
+   with one other candidate) is adapted instead: the group's minimal parametrisation
+   (:func:`minimal_member`); the groups reported are those of the final model.
 4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2.
 
 The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the whole chain
@@ -304,14 +307,62 @@ def separated(winner: CandidateTest, partner: CandidateTest, residual: FloatArra
     winner's columns in ``r_j`` is chi2(q) if the partner is the true effect; significant at
     ``alpha`` means the data separate them.
     """
-    U = partner.basis
+    return not _explains(partner.basis, winner, residual, alpha, absorbed)
+
+
+def _explains(U: FloatArray, winner: CandidateTest, residual: FloatArray, alpha: float,
+              absorbed: float) -> bool:
+    """Do the columns of the orthonormal ``U``, fitted (linearised), leave no significant
+    signal at ``alpha`` in the winner's columns projected orthogonal to them?"""
     rj = residual - U @ (U.T @ residual)
     W = winner.projected - U @ (U.T @ winner.projected)
     if np.linalg.norm(W) < absorbed * np.linalg.norm(winner.projected):
-        return False
+        return True
     basis = _orthonormal(W)
     T = float(np.sum((basis.T @ rj) ** 2))
-    return bool(stats.chi2.sf(T, basis.shape[1]) < alpha)
+    return bool(stats.chi2.sf(T, basis.shape[1]) >= alpha)
+
+
+def contained(inner: CandidateTest, outer: CandidateTest, level: float = CONFOUNDED) -> bool:
+    """Does ``inner``'s projected column space lie (nearly) inside ``outer``'s: every
+    canonical correlation of the two spaces above ``level`` (``inner`` has fewer columns)?"""
+    if inner.basis is None or outer.basis is None or not inner.basis.size \
+            or inner.basis.shape[1] > outer.basis.shape[1]:
+        return False
+    return bool(np.linalg.svd(inner.basis.T @ outer.basis, compute_uv=False).min() > level)
+
+
+def minimal_member(winner: CandidateTest, eligible: Sequence[CandidateTest],
+                   others: Sequence[CandidateTest], residual: FloatArray,
+                   alpha: float = ALPHA, absorbed: float = ABSORBED,
+                   confounded: float = CONFOUNDED) -> CandidateTest | None:
+    """The minimal parametrisation of the winner's signal, if smaller than the winner.
+
+    A candidate of ``eligible`` (Holm-significant) whose columns lie nearly inside the
+    winner's (:func:`contained`) stands in for it when, fitted alone or together with one
+    candidate of ``others`` (fewer parameters in total than the winner), it leaves no
+    significant signal in the winner's columns (linearised, at ``alpha``): the winner's
+    further parameters are then not needed, or explain what another effect does (a lever arm
+    standing in for a range bias and a focal scale). Fewest parameters first, then the
+    smallest p-value; None if no candidate qualifies.
+    """
+    best: tuple[tuple[int, float], CandidateTest] | None = None
+    for inner in eligible:
+        if inner.name == winner.name or inner.dof >= winner.dof \
+                or not contained(inner, winner, confounded):
+            continue
+        for extra in (None, *others):
+            if extra is not None and (extra.name in (winner.name, inner.name)
+                                      or inner.dof + extra.dof >= winner.dof):
+                continue
+            columns = [inner.projected] + ([] if extra is None else [extra.projected])
+            if _explains(_orthonormal(np.column_stack(columns)), winner, residual, alpha,
+                         absorbed):
+                key = (inner.dof + (0 if extra is None else extra.dof), inner.log_p)
+                if best is None or key < best[0]:
+                    best = (key, inner)
+                break
+    return None if best is None else best[1]
 
 
 # --------------------------------------------------------------------------- the DIA loop
@@ -334,6 +385,27 @@ class Step:
 
 
 @dataclass(frozen=True)
+class Group:
+    """A named effect and the candidates the data cannot tell from it.
+
+    Attributes
+    ----------
+    fitted : the member in the final model: the group's minimal parametrisation.
+    members : ``fitted`` first, then each candidate (not named) whose statistic correlates
+        with the fitted one's above ``confounded`` given the rest of the final model, and
+        which the data do not reject as the explanation of its signal (:func:`separated`).
+    correlation : other member -> largest canonical correlation with ``fitted``.
+    separating_data : other member -> the extra data that would tell it from ``fitted``
+        (``Problem.separating_data``; "" where the problem does not say).
+    """
+
+    fitted: str
+    members: tuple[str, ...]
+    correlation: dict[str, float] = field(default_factory=dict)
+    separating_data: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`diagnose`.
 
@@ -345,7 +417,8 @@ class Diagnosis:
     steps : the identification steps in order; the last one's global test passed, or no
         candidate was significant (``unexplained``).
     named : effects in the final model, in the order they were added.
-    groups : the confounded group of each named effect (the effect first).
+    groups : the confounded group of each named effect (the effect first), as in
+        ``confounded``.
     absorbed : candidates (not named) absorbed by the final model.
     outliers : the outlier test of each observation flagged, when it was flagged (its
         ``estimate`` is the shift of each residual component [sigma]).
@@ -366,6 +439,8 @@ class Diagnosis:
     swaps: list[tuple[str, str, float, float]] = field(default_factory=list)
     """(effect out, effect in, AIC before, AIC after) of each swap that improved the final
     model (see :func:`diagnose`)."""
+    confounded: list[Group] = field(default_factory=list)
+    """The confounded group of each named effect, given the final model (see :class:`Group`)."""
 
     @property
     def detected(self) -> bool:
@@ -416,7 +491,6 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     before = fit
     steps: list[Step] = []
     named: list[str] = []
-    groups: list[tuple[str, ...]] = []
     outliers: list[CandidateTest] = []
     dropped: dict[str, float] = {}
     fixed: set[str] = set()
@@ -443,7 +517,6 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
                                   {t.name: math.nan for t in outliers}))
                 outliers = []
                 named.append(name)
-                groups.append((name,))
             continue
         if fit.p_value >= alpha:
             steps.append(Step(fit, tests, None, (), snoop))
@@ -461,6 +534,12 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             win = next((t for t in sorted(eligible, key=lambda t: (t.log_p, t.dof))
                         if not is_outlier(t.name)
                         and not separated(win, t, fit.residual, level, absorbed)), win)
+        if not is_outlier(win.name):
+            stand_in = minimal_member(
+                win, [t for t in eligible if not is_outlier(t.name)],
+                [t for t in tests if t.status == "testable" and t.name not in dropped],
+                fit.residual, alpha, absorbed, confounded)
+            win = win if stand_in is None else stand_in
         partners = [] if is_outlier(win.name) else [
             t for t in tests if t.status == "testable" and t.name != win.name
             and canonical_correlation(win, t) > confounded
@@ -479,13 +558,11 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             steps.append(Step(tested, tests, win.name, (), snoop))
             continue
         named.append(win.name)
-        groups.append(group)
         fit, gone = _reconsider(full, fit, [*named, *(t.name for t in outliers)], fixed, alpha)
         for name, p in gone.items():
             if is_outlier(name):
                 outliers = [t for t in outliers if t.name != name]
             else:
-                groups.pop(named.index(name))
                 named.remove(name)
             dropped[name] = p
         steps.append(Step(tested, tests, win.name, group, snoop, gone))
@@ -493,14 +570,45 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     if len(named) >= 2:
         others = [t.name for t in steps[-1].tests
                   if t.status == "testable" and t.name not in dropped]
-        fit, swaps = _swap(full, fit, named, others, fixed)
+        # a candidate absorbed by a named effect may replace it with fewer parameters
+        smaller = [t.name for t in steps[0].tests if t.status == "testable"
+                   and t.name not in dropped and t.name not in named and t.name not in others]
+        fit, swaps = _swap(full, fit, named, others, fixed, smaller, alpha)
         for out, into, *_ in swaps:
-            i = named.index(out)
-            named[i], groups[i] = into, (into,)
+            named[named.index(out)] = into
     final = steps[-1]
-    absorbed_list = [t.name for t in final.tests if t.status == "absorbed"]
-    return Diagnosis(problem, alpha, before, fit, steps, named, groups, absorbed_list,
-                     outliers, dropped, swaps)
+    absorbed_list = [t.name for t in final.tests if t.status == "absorbed"
+                     and t.name not in named]
+    confounded_groups = [_group_of(full, effects_view, fit, name, named, fixed, alpha, power,
+                                   absorbed, confounded) for name in named]
+    return Diagnosis(problem, alpha, before, fit, steps, named,
+                     [g.members for g in confounded_groups], absorbed_list, outliers, dropped,
+                     swaps, confounded_groups)
+
+
+def _group_of(problem: Problem, view: Problem, fit: LeastSquaresFit, name: str,
+              named: Sequence[str], fixed: set[str], alpha: float, power: float,
+              absorbed: float, confounded: float) -> Group:
+    """The confounded group of the named effect ``name`` given the rest of the final model:
+    refit without it and collect the candidates (not named) whose statistics correlate with
+    its own above ``confounded`` and that the data do not separate from it."""
+    try:
+        without = _fit_with_fixed(problem, [e for e in fit.effects[1:] if e != name],
+                                  fit.params, fixed)
+    except (FitError, np.linalg.LinAlgError):
+        return Group(name, (name,))
+    tests = analyse_candidates(view, without, alpha, power, absorbed)
+    own = next(t for t in tests if t.name == name)
+    if own.status != "testable":
+        return Group(name, (name,))
+    correlation = {}
+    for t in tests:
+        if t.status == "testable" and t.name not in named:
+            rho = canonical_correlation(own, t)
+            if rho > confounded and not separated(own, t, without.residual, alpha, absorbed):
+                correlation[t.name] = rho
+    return Group(name, (name, *correlation), correlation,
+                 {m: problem.separating_data.get(frozenset((name, m)), "") for m in correlation})
 
 
 def _effect_for_outliers(problem: Problem, fit: LeastSquaresFit, flagged: Sequence[str],
@@ -523,14 +631,22 @@ def _effect_for_outliers(problem: Problem, fit: LeastSquaresFit, flagged: Sequen
 
 
 def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
-          others: Sequence[str], fixed: set[str]
-          ) -> tuple[LeastSquaresFit, list[tuple[str, str, float, float]]]:
+          others: Sequence[str], fixed: set[str], smaller: Sequence[str] = (),
+          alpha: float = ALPHA) -> tuple[LeastSquaresFit, list[tuple[str, str, float, float]]]:
     """Replace named effects by other candidates while that lowers Akaike's criterion
     ``chi2 + 2 p`` (the models compared are not nested; the step-wise additions can pick an
-    effect that stands in for another when several are present). Returns the final fit and
-    the swaps made."""
+    effect that stands in for another when several are present). A swap that adds ``k``
+    parameters must also lower chi2 by more than the ``1 - alpha`` quantile of chi2(k), as a
+    test of the extra parameters would (AIC alone accepts two unneeded parameters, a lever arm
+    for the range bias it contains, with probability P(chi2(2) > 4) = 13.5 %). Candidates of
+    ``smaller`` (absorbed by the final model) replace only an effect with more parameters.
+    Returns the final fit and the swaps made."""
     swaps: list[tuple[str, str, float, float]] = []
-    named, others = list(named), list(others)
+    named, others = list(named), [*others, *smaller]
+
+    def allowed(out: str, into: str) -> bool:
+        return into not in smaller or \
+            len(problem.effect(into).parameters) < len(problem.effect(out).parameters)
 
     def aic(f: LeastSquaresFit) -> float:
         return f.chi2 + 2.0 * len(f.names)
@@ -538,11 +654,14 @@ def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
     while True:
         best: tuple[float, str, str, LeastSquaresFit] | None = None
         for out in named:
-            for into in others:
+            for into in (c for c in others if allowed(out, c)):
                 model = [into if e == out else e for e in fit.effects[1:]]
                 try:
                     alt = _fit_with_fixed(problem, model, fit.params, fixed)
                 except (FitError, np.linalg.LinAlgError):  # not separable: no candidate
+                    continue
+                extra = len(alt.names) - len(fit.names)
+                if extra > 0 and fit.chi2 - alt.chi2 <= stats.chi2.isf(alpha, extra):
                     continue
                 if aic(alt) < aic(fit) and (best is None or aic(alt) < best[0]):
                     best = (aic(alt), out, into, alt)

@@ -9,11 +9,13 @@ the model and is absent when its parameters are zero. The prediction of one obse
 
 1. target position ``r`` (surveyed, frame b): ``target_height_scale`` ``z <- z (1 + s_h)``;
    ``target_lateral_bias``, ``target_range_bias``, ``target_height_bias``
-   ``r <- r + (b_x, b_y, b_z)``; ``earth_curvature`` ``z <- z - c d^2 / (2 R)`` and
-   ``refraction`` ``z <- z + k d^2 / (2 R)`` with ``d`` the horizontal distance and
-   ``R = 6371 km`` (physical values ``c = 1``, ``k = 0.13``);
+   ``r <- r + (b_x, b_y, b_z)``;
 2. ``lever_arm``: the projection centre sits at ``l = (l_x, l_y, l_z)`` in frame b, the ray is
-   ``r - l``;
+   ``r - l``; earth curvature and refraction, part of the base model
+   (:func:`apparent_height_shift`), lower its end by ``(1 - k) d^2 / (2 R)`` with ``d`` its
+   horizontal length, ``R = 6371 km`` and ``k = k_std + dk``, ``k_std`` the standard
+   coefficient (0.13 unless stated) and ``dk`` the ``refraction`` candidate (refraction
+   differs from standard);
 3. mounting angles ``(psi, theta, gamma) + w (t - t_mean)`` (``drift``, linear in ``t_s``)
    ``+`` the shift of the observation's session (``session_shift``; the first session is the
    reference); ``u = C_b^a (r - l)``;
@@ -27,8 +29,9 @@ the model and is absent when its parameters are zero. The prediction of one obse
 
 References
 ----------
-seed 000: Ding Tao (2014), eqs. (1)-(5) (camera, mounting matrix). Refraction and curvature:
-the standard geodetic correction ``(1 - k) d^2 / (2 R)`` with Gauss's coefficient k = 0.13.
+seed 000: Ding Tao (2014), eqs. (1)-(5) (camera, mounting matrix). Curvature and refraction:
+the correction ``(1 - k) d^2 / (2 R)`` of trigonometric heighting (W. Torge, J. Mueller (2012),
+Geodesy, 4th ed., de Gruyter, trigonometric heighting), with Gauss's coefficient k = 0.13.
 Distortion: D. C. Brown (1966), Decentering distortion of lenses.
 """
 
@@ -90,19 +93,37 @@ _CANDIDATES = (
                "true z = surveyed z + b_z [m]"),
     Effect("lever_arm", ("l_x", "l_y", "l_z"), ((-1.0, 1.0),) * 3, (1e-5,) * 3,
                "projection centre at (l_x, l_y, l_z) in frame b [m]", (1.0, 1.0, 1.0)),
-    Effect("refraction", ("k",), ((-5.0, 5.0),), (1e-2,),
-               "apparent z + k d^2 / (2 R), standard k = 0.13 [1]"),
-    Effect("earth_curvature", ("c",), ((0.0, 2.0),), (1e-2,),
-               "apparent z - c d^2 / (2 R), physical c = 1 [1]"),
+    Effect("refraction", ("dk",), ((-5.0, 5.0),), (1e-2,),
+               "refraction differs from standard: k = k_std + dk, apparent z + dk d^2 / (2 R) "
+               "[1]"),
     Effect("drift", ("w_psi", "w_theta", "w_gamma"), ((-1e-5, 1e-5),) * 3, (1e-10,) * 3,
                "mounting angles + w (t_s - mean t_s) [rad/s]", (1.0, 1.0, 1.0)),
 )
+
+_SECOND_STATION = ("the projection centre surveyed, or the targets seen from a second sensor "
+                   "position: a lever arm is minus a common shift of all targets")
+SEPARATING_DATA = {
+    **{frozenset(("lever_arm", bias)): _SECOND_STATION
+       for bias in ("target_range_bias", "target_lateral_bias", "target_height_bias")},
+    **{frozenset((a, b)): "targets at a second range"
+       for a, b in (("focal_scale", "target_range_bias"), ("focal_scale", "lever_arm"),
+                    ("principal_point", "target_lateral_bias"),
+                    ("principal_point", "target_height_bias"), ("principal_point", "lever_arm"),
+                    ("refraction", "target_height_scale"), ("refraction", "target_height_bias"))},
+    frozenset(("target_height_scale", "target_height_bias")): "targets at more than one height",
+    frozenset(("radial_distortion", "focal_scale")): "targets nearer the edge of the field",
+    frozenset(("drift", "session_shift")): "observations spread over each session",
+}
+"""Pair of ground candidates -> the extra data that would tell them apart. A shift ``b`` of a
+target at range ``y`` moves its image by ``b / y``, a scale or a principal point does not
+depend on range; a height scale moves a target by ``s_h z``, a height bias by ``b_z``;
+refraction grows as ``d^2``; distortion as ``r^3``, a focal scale as ``r``."""
 
 SESSION_SHIFT_BOUND = 0.05
 """Physical bound of a session's shift of each mounting angle [rad]."""
 
 DISPLAY_UNITS = {
-    **dict.fromkeys(("k1", "p1", "p2", "s", "a", "s_h", "k", "c"), ("1", 1.0)),
+    **dict.fromkeys(("k1", "p1", "p2", "s", "a", "s_h", "dk"), ("1", 1.0)),
     **dict.fromkeys(("c_x", "c_z"), ("px", 1.0)),
     **dict.fromkeys(("b_x", "b_y", "b_z", "l_x", "l_y", "l_z"), ("m", 1.0)),
     **dict.fromkeys(("psi", "theta", "gamma"), ("deg", math.pi / 180.0)),
@@ -164,8 +185,36 @@ def candidates_for(data: GroundData) -> tuple[tuple[Effect, ...], dict[str, str]
     return (*_CANDIDATES, shift), unavailable
 
 
-def predict_pixels(params: Mapping[str, ArrayLike], data: GroundData, camera: Camera
-                   ) -> FloatArray:
+def apparent_height_shift(horizontal: ArrayLike, k: ArrayLike) -> FloatArray:
+    """Shift of a target's apparent height by earth curvature and refraction [m].
+
+    Surveyed heights are above the level surface through the sensor. At horizontal distance
+    ``L`` [m] that surface has dropped ``L^2 / (2 R)`` below the sensor's horizontal plane
+    (``R`` = 6.371e6 m, ``L << R``). Refraction bends the line of sight into an arc of radius
+    ``R / k``, concave to the ground, which raises the target's apparent position by
+    ``k L^2 / (2 R)``. The apparent height is therefore shifted by
+
+        ``dz = -(1 - k) L^2 / (2 R)``  [m],
+
+    an apparent-elevation change of ``-(1 - k) L / (2 R)`` [rad] (0.068 mrad at 1 km with
+    k = 0.13).
+
+    Parameters
+    ----------
+    horizontal : horizontal distance L [m].
+    k : coefficient of refraction [1] (Gauss's standard value 0.13).
+
+    References
+    ----------
+    W. Torge, J. Mueller (2012), Geodesy, 4th ed., trigonometric heighting: the height
+    difference ``S sin(e) + (1 - k) S^2 / (2 R)`` from slope distance S and elevation e.
+    """
+    L = np.asarray(horizontal, float)
+    return -(1.0 - np.asarray(k, float)) * L**2 / (2.0 * EARTH_RADIUS)
+
+
+def predict_pixels(params: Mapping[str, ArrayLike], data: GroundData, camera: Camera,
+                   refraction: float = STANDARD_REFRACTION) -> FloatArray:
     """Predicted image coordinates of every observation, shape (..., n, 2) [px].
 
     Parameters
@@ -174,11 +223,14 @@ def predict_pixels(params: Mapping[str, ArrayLike], data: GroundData, camera: Ca
         for k parameter vectors at once. Missing parameters are zero (effect absent).
     data : positions, times and sessions of the observations (pixels unused).
     camera : field of view and pixel counts.
+    refraction : standard coefficient of refraction k_std [1] of the base model; the
+        ``refraction`` candidate's ``dk`` adds to it.
 
     References
     ----------
-    seed 000, eq. (5) (mounting matrix) and eqs. (1)-(4) (tangent-plane projection); the
-    candidate effects as in the module docstring.
+    seed 000, eq. (5) (mounting matrix) and eqs. (1)-(4) (tangent-plane projection);
+    :func:`apparent_height_shift` (curvature and refraction); the candidate effects as in the
+    module docstring.
     """
     def p(name: str) -> FloatArray:
         return np.asarray(params.get(name, 0.0), float)
@@ -186,9 +238,9 @@ def predict_pixels(params: Mapping[str, ArrayLike], data: GroundData, camera: Ca
     x, y, z = (data.positions[:, j] for j in range(3))
     z = z * (1.0 + p("s_h"))
     x, y, z = x + p("b_x"), y + p("b_y"), z + p("b_z")
-    d2 = x**2 + y**2
-    z = z + (p("k") - p("c")) * d2 / (2.0 * EARTH_RADIUS)
-    ray = np.stack(np.broadcast_arrays(x - p("l_x"), y - p("l_y"), z - p("l_z")), axis=-1)
+    x, y, z = x - p("l_x"), y - p("l_y"), z - p("l_z")
+    z = z + apparent_height_shift(np.hypot(x, y), refraction + p("dk"))
+    ray = np.stack(np.broadcast_arrays(x, y, z), axis=-1)
 
     angles = [p(a) for a in ("psi", "theta", "gamma")]
     if data.t is not None:
@@ -220,14 +272,18 @@ def predict_pixels(params: Mapping[str, ArrayLike], data: GroundData, camera: Ca
     return np.stack([px + p("c_x"), pz + p("c_z")], axis=-1)
 
 
-def initial_mounting(data: GroundData, camera: Camera) -> dict[str, float]:
+def initial_mounting(data: GroundData, camera: Camera,
+                     refraction: float = STANDARD_REFRACTION) -> dict[str, float]:
     """Mounting angles that best rotate the surveyed directions onto the measured ones.
 
     Wahba's problem (``scipy.spatial.transform.Rotation.align_vectors``): the rotation taking
-    unit target directions in b to the unit directions of the measured pixels in a is
+    unit apparent target directions in b (surveyed positions lowered by
+    :func:`apparent_height_shift`) to the unit directions of the measured pixels in a is
     ``C_b^a``; its Z-X-Y angles start the least-squares fit.
     """
-    b = data.positions / np.linalg.norm(data.positions, axis=1, keepdims=True)
+    seen = data.positions.copy()
+    seen[:, 2] += apparent_height_shift(np.hypot(seen[:, 0], seen[:, 1]), refraction)
+    b = seen / np.linalg.norm(seen, axis=1, keepdims=True)
     a = direction_from_pixels(data.pixels[:, 0], data.pixels[:, 1], camera)
     with warnings.catch_warnings():  # degenerate directions: the fit reports them (FitError)
         warnings.simplefilter("ignore", UserWarning)
@@ -254,25 +310,28 @@ def pixel_covariance(data: GroundData, camera: Camera, mounting: Mapping[str, fl
 
 
 def ground_problem(data: GroundData, camera: Camera, pixel_sigma: float,
-                   survey_sigma: float = 0.0) -> Problem:
+                   survey_sigma: float = 0.0, refraction: float = STANDARD_REFRACTION
+                   ) -> Problem:
     """The DIA problem of ground observations with stated pixel and survey noise.
 
-    Residuals are whitened per target with the covariance of :func:`pixel_covariance` at the
-    starting mounting angles (:func:`initial_mounting`).
+    The base model includes earth curvature and refraction with the standard coefficient
+    ``refraction`` [1] (:func:`apparent_height_shift`). Residuals are whitened per target
+    with the covariance of :func:`pixel_covariance` at the starting mounting angles
+    (:func:`initial_mounting`).
     """
-    start = initial_mounting(data, camera)
+    start = initial_mounting(data, camera, refraction)
     cov = pixel_covariance(data, camera, start, pixel_sigma, survey_sigma)
     whiten = np.linalg.inv(np.linalg.cholesky(cov))
     observed = data.pixels
 
     def residuals(values: Mapping[str, FloatArray]) -> FloatArray:
-        diff = observed - predict_pixels(values, data, camera)
+        diff = observed - predict_pixels(values, data, camera, refraction)
         white = np.einsum("nij,...nj->...ni", whiten, diff)
         return white.reshape(*white.shape[:-2], -1)
 
     candidates, unavailable = candidates_for(data)
     return Problem("ground", BASE, candidates, residuals, start, unavailable,
-                   observations(data))
+                   observations(data), SEPARATING_DATA)
 
 
 def observations(data: GroundData) -> tuple[tuple[str, int, tuple[int, ...]], ...]:
@@ -285,9 +344,10 @@ def observations(data: GroundData) -> tuple[tuple[str, int, tuple[int, ...]], ..
                  for i, n in enumerate(names))
 
 
-def raw_residuals(data: GroundData, camera: Camera, params: Mapping[str, float]) -> FloatArray:
+def raw_residuals(data: GroundData, camera: Camera, params: Mapping[str, float],
+                  refraction: float = STANDARD_REFRACTION) -> FloatArray:
     """Measured minus predicted image coordinates, shape (n, 2) [px]."""
-    return data.pixels - predict_pixels(params, data, camera)
+    return data.pixels - predict_pixels(params, data, camera, refraction)
 
 
 # --------------------------------------------------------------------------- layouts, simulation
@@ -331,33 +391,37 @@ def field_layout(camera: Camera, mounting: Mapping[str, float], ranges: Sequence
 
 
 def simulate(layout: GroundData, camera: Camera, truth: Mapping[str, float], pixel_sigma: float,
-             survey_sigma: float, rng: int | np.random.Generator | None = None) -> GroundData:
+             survey_sigma: float, rng: int | np.random.Generator | None = None,
+             refraction: float = STANDARD_REFRACTION) -> GroundData:
     """Measured-like data: pixels of the true positions under ``truth`` plus noise.
 
     The file gets surveyed positions = true positions + ``N(0, survey_sigma^2)`` per axis;
-    the pixels are ``predict_pixels(truth)`` of the true positions + ``N(0, pixel_sigma^2)``.
+    the pixels are ``predict_pixels(truth)`` of the true positions + ``N(0, pixel_sigma^2)``,
+    with earth curvature and refraction ``refraction`` + the truth's ``dk``.
     """
     rng = np.random.default_rng(rng)
-    pixels = predict_pixels(truth, layout, camera)
+    pixels = predict_pixels(truth, layout, camera, refraction)
     pixels = pixels + pixel_sigma * rng.standard_normal(pixels.shape)
     surveyed = layout.positions + survey_sigma * rng.standard_normal(layout.positions.shape)
     return GroundData(layout.targets, surveyed, pixels, layout.t, layout.session)
 
 
 def exact_problem(layout: GroundData, camera: Camera, truth: Mapping[str, float],
-                  pixel_sigma: float, survey_sigma: float) -> Problem:
+                  pixel_sigma: float, survey_sigma: float,
+                  refraction: float = STANDARD_REFRACTION) -> Problem:
     """The problem of noise-free data generated by ``truth`` (for design MDBs)."""
-    exact = GroundData(layout.targets, layout.positions, predict_pixels(truth, layout, camera),
-                       layout.t, layout.session)
-    return ground_problem(exact, camera, pixel_sigma, survey_sigma)
+    exact = GroundData(layout.targets, layout.positions,
+                       predict_pixels(truth, layout, camera, refraction), layout.t,
+                       layout.session)
+    return ground_problem(exact, camera, pixel_sigma, survey_sigma, refraction)
 
 
 TRUTH_KEYS = tuple(p for c in _CANDIDATES for p in c.parameters)
 """Parameters of every candidate effect (session shifts aside)."""
 
 
-def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sigma: float
-                ) -> SystemView:
+def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sigma: float,
+                refraction: float = STANDARD_REFRACTION) -> SystemView:
     """How reports show a ground diagnosis: units, residual axes, Monte Carlo study params."""
     tangent = data.pixels / np.array([camera.k_x, camera.k_z])
     radius = np.hypot(tangent[:, 0], tangent[:, 1])
@@ -382,7 +446,7 @@ def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sig
         values = fit.params
         return {"fov_yaw": float(camera.fov_yaw), "fov_pitch": float(camera.fov_pitch),
                 "n_x": int(camera.n_x), "n_z": int(camera.n_z), "pixel_sigma": pixel_sigma,
-                "survey_sigma": survey_sigma, "layout": layout,
+                "survey_sigma": survey_sigma, "layout": layout, "refraction_k": refraction,
                 **{k: float(values.get(k, 0.0)) for k in ("psi", "theta", "gamma",
                                                           *TRUTH_KEYS)},
                 "extra_truth": json.dumps({q: values[q] for q in shifts if q in values}),
@@ -390,5 +454,6 @@ def report_view(data: GroundData, camera: Camera, pixel_sigma: float, survey_sig
                 "diagnose": 0}
 
     return SystemView("ground", display_unit, "px", 1.0, ("px", "pz"),
-                      lambda params: raw_residuals(data, camera, params), axes,
-                      "discrepancy_ground", study_params, shift_unit)
+                      lambda params: raw_residuals(data, camera, params, refraction), axes,
+                      "discrepancy_ground", study_params, shift_unit,
+                      {"earth_curvature": True, "refraction_k": refraction})

@@ -69,6 +69,8 @@ class Problem:
     observations : (id, row in the data file, indices of its whitened residuals) of each
         observation that can be wrong on its own (a target's image point, a mirror's
         readings); empty: no data snooping.
+    separating_data : pair of candidate names -> the extra data that would tell them apart
+        (for reports of confounded groups; pairs not listed get a generic text).
     """
 
     system: str
@@ -78,6 +80,7 @@ class Problem:
     start: Mapping[str, float]
     unavailable: Mapping[str, str] = field(default_factory=dict)
     observations: tuple[tuple[str, int, tuple[int, ...]], ...] = ()
+    separating_data: Mapping[frozenset[str], str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = [p for e in (self.base, *self.candidates) for p in e.parameters]
@@ -134,7 +137,8 @@ def with_outliers(problem: Problem) -> Problem:
         return r
 
     return Problem(problem.system, problem.base, (*problem.candidates, *effects), residuals,
-                   problem.start, problem.unavailable, problem.observations)
+                   problem.start, problem.unavailable, problem.observations,
+                   problem.separating_data)
 
 
 def is_outlier(name: str) -> bool:

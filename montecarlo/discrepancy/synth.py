@@ -94,12 +94,13 @@ def synth_ground(*, seed: int, camera: Camera, pixel_sigma: float, survey_sigma:
                  mounting: Mapping[str, float], ranges: Sequence[float],
                  grid: tuple[int, int], spread: float, duration: float, sessions: int,
                  effects: Mapping[str, float], at_mdb: Mapping[str, float],
-                 atmosphere: bool = True, with_time: bool = True
+                 refraction: float = ge.STANDARD_REFRACTION, with_time: bool = True
                  ) -> tuple[GroundData, dict[str, float], int]:
     """One ground data set: targets of :func:`montecarlo.discrepancy.ground_effects.field_layout`.
 
-    ``atmosphere`` puts earth curvature and refraction at their physical values (c = 1,
-    k = 0.13) unless ``effects`` sets them. Targets imaged off the detector are dropped.
+    The data carry earth curvature and refraction with coefficient ``refraction`` [1] (plus
+    the ``refraction`` effect's ``dk``, if injected). Targets imaged off the detector are
+    dropped.
 
     Returns
     -------
@@ -111,11 +112,10 @@ def synth_ground(*, seed: int, camera: Camera, pixel_sigma: float, survey_sigma:
     if not with_time:
         layout = GroundData(layout.targets, layout.positions, layout.pixels, None,
                                layout.session)
-    truth = {**mounting, **({"c": 1.0, "k": ge.STANDARD_REFRACTION} if atmosphere else {}),
-             **effects}
-    truth = _inject(lambda tr: ge.exact_problem(layout, camera, tr, pixel_sigma, survey_sigma),
-                    truth, at_mdb)
-    data = ge.simulate(layout, camera, truth, pixel_sigma, survey_sigma, noise_seed)
+    truth = {**mounting, **effects}
+    truth = _inject(lambda tr: ge.exact_problem(layout, camera, tr, pixel_sigma, survey_sigma,
+                                                refraction), truth, at_mdb)
+    data = ge.simulate(layout, camera, truth, pixel_sigma, survey_sigma, noise_seed, refraction)
     visible = (np.abs(data.pixels[:, 0]) <= camera.n_x / 2) & \
         (np.abs(data.pixels[:, 1]) <= camera.n_z / 2)
     keep = np.flatnonzero(visible)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,8 @@ class SystemView:
         (``discrepancy_ground``, ``discrepancy_collimation``).
     study_params : the ``run_trials`` parameters (SI) of that system for a fit's model.
     shift_unit : parameter -> (unit, size in SI) for small changes of it (influences).
+    base_physics : known physics in the base model, fixed, not fitted (ground: earth
+        curvature and the standard coefficient of refraction).
     """
 
     system: str
@@ -51,6 +53,7 @@ class SystemView:
     study_system: str
     study_params: Callable[[LeastSquaresFit], dict[str, Any]]
     shift_unit: Callable[[str], tuple[str, float]] | None = None
+    base_physics: Mapping[str, Any] = field(default_factory=dict)
 
     def unit(self, name: str) -> tuple[str, float]:
         """Display unit of a parameter; an observation's shift is in sigma."""
@@ -107,6 +110,30 @@ def largest_residuals(d: Diagnosis, view: SystemView, k: int = 5) -> list[dict[s
     return out
 
 
+GENERIC_SEPARATION = "data on which their signatures differ"
+"""What separates two members of a group when the problem does not say."""
+
+
+def _groups(d: Diagnosis, view: SystemView) -> list[dict[str, Any]]:
+    """Each confounded group of two or more: its members, the member fitted (the minimal
+    parametrisation) with its parameters, and what it cannot separate and which data would."""
+    out = []
+    for g in d.confounded:
+        if len(g.members) < 2:
+            continue
+        params = {p: d.after.params[p] for p in d.problem.effect(g.fitted).parameters
+                  if p in d.after.params}
+        out.append({"members": list(g.members), "fitted": g.fitted,
+                    "parameters": _show(view, params),
+                    "stderr": _show(view, {p: d.after.stderr[p] for p in params}),
+                    "units": {k: view.unit(k)[0] for k in params},
+                    "cannot_separate": [
+                        {"member": m, "from": g.fitted, "correlation": g.correlation[m],
+                         "separating_data": g.separating_data.get(m) or GENERIC_SEPARATION}
+                        for m in g.members[1:]]})
+    return out
+
+
 def _gap(view: SystemView, fit: LeastSquaresFit) -> dict[str, float]:
     return {"chi2_red": fit.chi2_red, "rms": residual_rms(view, fit), "p_value": fit.p_value,
             "chi2": fit.chi2, "dof": fit.dof}
@@ -147,6 +174,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "unexplained": d.unexplained,
         "named_effects": named,
         "confounded_groups": [list(g) for g in d.groups if len(g) > 1],
+        "groups": _groups(d, view),
         "absorbed": d.absorbed,
         "outliers": _outliers(d, view),
         "dropped_effects": [{"name": n, "p_value": p} for n, p in d.dropped.items()],
@@ -155,6 +183,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "largest_residuals": largest_residuals(d, view),
         "gap": {"before": _gap(view, d.before), "after": _gap(view, d.after)},
         "rms_unit": view.rms_unit,
+        "base_physics": dict(view.base_physics),
         "alpha": d.alpha,
         "chi2_red_band_99": {"before": chi2_red_band(d.before.dof),
                              "after": chi2_red_band(d.after.dof)},
@@ -183,6 +212,10 @@ def format_text(report: Mapping[str, Any]) -> str:
     b, a = g["before"], g["after"]
     lines.append(f"base model: chi2_red = {b['chi2_red']:.3f} (dof {b['dof']}), "
                  f"p = {_p(b['p_value'])}, rms = {b['rms']:.4g} {unit}")
+    physics = report.get("base_physics", {})
+    if physics:
+        lines.append("known physics in the base model: " + ", ".join(
+            k.replace("_", " ") + ("" if v is True else f" = {v:g}") for k, v in physics.items()))
     if not report["detected"]:
         lines.append("global test passes: no missing effect")
     for e in report["named_effects"]:
@@ -190,9 +223,15 @@ def format_text(report: Mapping[str, Any]) -> str:
                            for k, v in e["parameters"].items())
         lines.append(f"named: {e['name']} ({values}); identification p = "
                      f"{_p(e['p_value'])} (Holm), T = {e['statistic']:.1f} on {e['dof']} dof")
-    for group in report["confounded_groups"]:
-        lines.append(f"confounded group (the data cannot tell these apart): "
-                     f"{', '.join(group)}")
+    for g in report.get("groups", []):
+        values = ", ".join(f"{k} = {v:.4g} ± {g['stderr'][k]:.2g}{_unit(g['units'][k])}"
+                           for k, v in g["parameters"].items())
+        lines.append(f"group [{', '.join(g['members'])}]: fitted as {g['fitted']} ({values}), "
+                     "its minimal parametrisation")
+        for c in g["cannot_separate"]:
+            lines.append(f"  cannot separate {c['member']} from {c['from']} (correlation "
+                         f"{c['correlation']:.3f}); would separate them: "
+                         f"{c['separating_data']}")
     for o in report["outliers"]:
         size = ", ".join(f"{k} {v:+.3g}" for k, v in o["size"].items())
         lines.append(f"outlier: observation {o['id']} (row {o['observation']}): {size} "

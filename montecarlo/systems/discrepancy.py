@@ -40,7 +40,7 @@ GROUND_DEFAULTS: dict[str, float | int | str] = {
     "pixel_sigma": 0.3, "survey_sigma": 0.01, "layout": "",
     **ge.DEFAULT_MOUNTING,
     **dict.fromkeys(ge.TRUTH_KEYS, 0.0),
-    "c": 1.0, "k": ge.STANDARD_REFRACTION,
+    "refraction_k": ge.STANDARD_REFRACTION,
     "extra_truth": "",
     "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
     "n_outliers": 0, "outlier_size": 0.0,
@@ -66,8 +66,11 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
         :func:`default_layout` at the true mounting. ``psi``, ``theta``, ``gamma`` [rad]: true
         mounting (30, 20, 10 deg). Every candidate parameter (``k1``, ``p1``, ``p2``, ``c_x``
         [px], ``c_z`` [px], ``s``, ``a``, ``rho`` [rad], ``s_h``, ``b_x``, ``b_y``, ``b_z``,
-        ``l_x``, ``l_y``, ``l_z`` [m], ``k``, ``c``, ``w_psi``, ``w_theta``, ``w_gamma``
-        [rad/s]): its true value (0, except the physical ``c`` = 1 and ``k`` = 0.13).
+        ``l_x``, ``l_y``, ``l_z`` [m], ``dk``, ``w_psi``, ``w_theta``, ``w_gamma``
+        [rad/s]): its true value (0; ``dk`` [1] is the true refraction coefficient's
+        difference from ``refraction_k``). ``refraction_k`` [1] (0.13): the standard
+        coefficient of refraction, in the base model of the fit and in the simulated data
+        with earth curvature (:func:`montecarlo.discrepancy.ground_effects.apparent_height_shift`).
         ``extra_truth`` [JSON text]: further true parameters, e.g. session shifts [rad].
         ``fit_effects`` [text]: comma-separated effects fitted for ``chi2`` .. ``rms`` ("":
         the base model). ``diagnose`` [0/1]: also run the whole DIA diagnosis. ``expected``
@@ -89,7 +92,7 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
         With ``diagnose``: ``detected``, ``named_any`` [0/1]; ``n_named`` [count];
         ``named_expected`` [0/1] (the expected effect named), ``named_expected_or_group``
         [0/1] (named or in a named effect's confounded group); ``named_watched`` [0/1]
-        (refraction or earth_curvature named); ``expected_within_2sigma`` [1] (fraction of
+        (refraction named: k differs from the standard); ``expected_within_2sigma`` [1] (fraction of
         its parameters within 2 sigma of the truth, when it is named);
         ``expected_all_within_2sigma`` [0/1]; ``chi2_red_after`` [1] and
         ``chi2_red_after_in_band`` [0/1] (inside the central 99 % band of chi2(dof)/dof).
@@ -106,11 +109,13 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
     layout = (default_layout(camera, truth) if not p["layout"]
               else GroundData.from_layout(str(p["layout"])))
     sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
+    k_std = float(p["refraction_k"])
     alpha = float(p["alpha"])
     expected = str(p["expected"])
     effects = tuple(e for e in str(p["fit_effects"]).split(",") if e.strip())
     effects = tuple(e.strip() for e in effects)
-    truth = _inject(lambda tr: ge.exact_problem(layout, camera, tr, sigma, survey), truth, p)
+    truth = _inject(lambda tr: ge.exact_problem(layout, camera, tr, sigma, survey, k_std),
+                    truth, p)
     count, size = int(p["n_outliers"]), float(p["outlier_size"]) * sigma
 
     def spoil(data: GroundData, g: np.random.Generator) -> tuple[GroundData, set[str]]:
@@ -121,11 +126,12 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
         return dataclasses.replace(data, pixels=pixels), ids
 
     return score_trials(
-        lambda g: ge.simulate(layout, camera, truth, sigma, survey, g),
-        lambda data: ge.ground_problem(data, camera, sigma, survey),
-        lambda data, fit: float(np.sqrt(np.mean(ge.raw_residuals(data, camera, fit.params) ** 2))),
+        lambda g: ge.simulate(layout, camera, truth, sigma, survey, g, k_std),
+        lambda data: ge.ground_problem(data, camera, sigma, survey, k_std),
+        lambda data, fit: float(np.sqrt(np.mean(
+            ge.raw_residuals(data, camera, fit.params, k_std) ** 2))),
         truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
-        watched=("refraction", "earth_curvature"), spoil=spoil if count else None)
+        watched=("refraction",), spoil=spoil if count else None)
 
 
 def _inject(exact: Any, truth: dict[str, float], p: Mapping[str, Any]) -> dict[str, float]:
