@@ -109,14 +109,41 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     from montecarlo.io.collimation_csv import read_mirror_csv
 
     _check_outputs(args)
+    sigma = args.angle_sigma_arcsec * ARCSEC
+    if args.readings == "reference":
+        return _diagnose_procedure(args, sigma)
+    if args.roll_mirror is not None:
+        raise InputError("--roll-mirror: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
-    sigma = args.angle_sigma_arcsec * ARCSEC
     try:
         d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+
+
+def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
+    """``diagnose collimation --readings reference``: the procedure's reading model as base."""
+    from montecarlo.discrepancy import procedure_effects as pe
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.fit import FitError
+    from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, read_mirror_csv
+    from montecarlo.seed003.reference import SIDES
+
+    data = read_mirror_csv(args.data, pe.min_mirrors(), "gamma, lambda (+ reference azimuth) "
+                           "+ up to 2 parameters of an effect + 1 degree of freedom",
+                           sets=SETS + REFERENCE_SETS)
+    side = SIDES[args.roll_mirror or "right"]
+    measured = sum(s in SETS for s in data.sets)
+    if measured < pe.min_mirrors():
+        raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
+                         f"{pe.min_mirrors()} needed")
+    try:
+        d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
+    except FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data))
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:
@@ -229,6 +256,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    "ins_az_deg, ins_el_deg[, ins_roll_deg]")
     p.add_argument("--angle-sigma-arcsec", type=positive, required=True, metavar="S",
                    help="standard deviation of each heading and pitch residual [arc-seconds]")
+    p.add_argument("--readings", choices=("reference", "absolute"), default="reference",
+                   help="reference (default): the paper's procedure, readings relative to the "
+                   "INS's reference (reference rows, or relative readings); absolute: the "
+                   "absolute-reading model")
+    p.add_argument("--roll-mirror", choices=("right", "left"), default=None,
+                   help="side of the roll reference mirror (--readings reference; right)")
     common(p)
     p.set_defaults(func=_cmd_diagnose_collimation)
 
