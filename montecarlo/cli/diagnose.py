@@ -195,6 +195,25 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
     from montecarlo.seed003.model import Noise
 
     _check_files(args)
+    absolute_only = {"--n-azimuth": args.n_azimuth, "--n-pitch": args.n_pitch,
+                     "--azimuth-span-deg": args.azimuth_span_deg,
+                     "--pitch-span-deg": args.pitch_span_deg}
+    if args.readings == "reference":
+        given = [k for k, v in absolute_only.items() if v is not None]
+        if given:
+            raise InputError(f"{', '.join(given)}: only with --readings absolute (the "
+                             "procedure's mirrors are --azimuths-deg, --pitch-elevations-deg)")
+        return _synth_procedure(args)
+    for flag, used in (("--no-reference-rows", args.no_reference_rows),
+                       ("--roll-mirror", args.roll_mirror),
+                       ("--azimuths-deg", args.azimuths_deg),
+                       ("--pitch-elevations-deg", args.pitch_elevations_deg)):
+        if used:
+            raise InputError(f"{flag}: only with --readings reference")
+    for key, default in (("n_azimuth", 7), ("n_pitch", 7), ("azimuth_span_deg", 90.0),
+                         ("pitch_span_deg", 60.0)):
+        if getattr(args, key) is None:
+            setattr(args, key, default)
     candidates = {c.name: c for c in ce.CANDIDATES}
     effects = synth.parse_effects(args.effect, candidates, ce.display_unit)
     at_mdb = synth.parse_multiples(args.at_mdb, candidates)
@@ -217,6 +236,54 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
     print(f"wrote {args.out}: {len(data.mirror)} mirrors, seed {args.seed}; diagnose with "
           f"--angle-sigma-arcsec {sigma:.4g}; injected: "
           + (", ".join(f"{k} = {v:.4g}{_unit(ce.display_unit(k)[0])}" for k, v in shown.items())
+             or "nothing"))
+    return 0
+
+
+def _synth_procedure(args: argparse.Namespace) -> int:
+    """``synth collimation --readings reference``: one calibration by the paper's procedure."""
+    from montecarlo.cli.collimation import _angle_list
+    from montecarlo.discrepancy import collimation_effects as ce
+    from montecarlo.discrepancy import procedure_effects as pe
+    from montecarlo.discrepancy import synth
+    from montecarlo.io.collimation_csv import write_mirror_csv
+    from montecarlo.seed003.model import Noise
+    from montecarlo.seed003.reference import SIDES
+
+    rows = not args.no_reference_rows
+    if args.with_roll and not rows:
+        raise InputError("--with-roll: only with reference rows (relative files carry no roll)")
+    azimuths = _angle_list("--azimuths-deg", args.azimuths_deg or "-30,-15,15,30,45")
+    pitches = _angle_list("--pitch-elevations-deg", args.pitch_elevations_deg
+                          or "4,7.5,11,14.5,18")
+    if len(azimuths) + len(pitches) < pe.min_mirrors():
+        raise InputError(f"--azimuths-deg, --pitch-elevations-deg: at least {pe.min_mirrors()} "
+                         "mirrors needed")
+    axis = next(c for c in ce.CANDIDATES if c.name == "axis_misalignment")
+    candidates = {axis.name: axis, **{c.name: c for c in pe.CANDIDATES}}
+    effects = synth.parse_effects(args.effect, candidates, pe.display_unit)
+    at_mdb = synth.parse_multiples(args.at_mdb, {c.name: c for c in pe.CANDIDATES})
+    ins = args.ins_sigma_arcsec * ARCSEC
+    noise = Noise(args.theodolite_sigma_arcsec * ARCSEC, ins, ins, ins,
+                  math.radians(args.mount_roll_sigma_deg))
+    data, truth = synth.synth_procedure(
+        seed=args.seed, layout=pe.paper_layout(rows, azimuths, pitches),
+        frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
+        at_mdb=at_mdb, side=SIDES[args.roll_mirror or "right"],
+        with_roll=args.with_roll or (rows and args.mount_roll_sigma_deg > 0))
+    write_mirror_csv(args.out, data)
+    sigma = math.hypot(args.theodolite_sigma_arcsec, args.ins_sigma_arcsec)
+    if args.truth:
+        write_text(args.truth, synth.truth_report(
+            "collimation", args.seed, truth, pe.display_unit, angle_sigma_arcsec=sigma,
+            readings="reference", reference_rows=rows, roll_mirror=args.roll_mirror or "right"))
+    shown = {k: v / pe.display_unit(k)[1] for k, v in truth.items()
+             if k != "frame_heading" and v != 0.0}
+    print(f"wrote {args.out}: {len(data.mirror)} rows ("
+          + ("absolute readings with the two reference rows" if rows
+             else "readings relative to the reference") + f"), seed {args.seed}; diagnose with "
+          f"--angle-sigma-arcsec {sigma:.4g}; injected: "
+          + (", ".join(f"{k} = {v:.4g}{_unit(pe.display_unit(k)[0])}" for k, v in shown.items())
              or "nothing"))
     return 0
 
@@ -302,10 +369,27 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = ssub.add_parser("collimation", help="seed 003 fixture: azimuth and pitch mirrors")
     effect_options(p)
-    p.add_argument("--n-azimuth", type=positive_int, default=7)
-    p.add_argument("--n-pitch", type=positive_int, default=7)
-    p.add_argument("--azimuth-span-deg", type=finite, default=90.0)
-    p.add_argument("--pitch-span-deg", type=finite, default=60.0)
+    p.add_argument("--readings", choices=("reference", "absolute"), default="reference",
+                   help="reference (default): the paper's procedure (reference mirrors at 0 and "
+                   "±90°, --azimuths-deg, --pitch-elevations-deg); absolute: the "
+                   "absolute-reading model on --n-azimuth/--n-pitch mirrors")
+    p.add_argument("--azimuths-deg", default=None,
+                   help="horizontal mirrors (reference readings; default -30,-15,15,30,45)")
+    p.add_argument("--pitch-elevations-deg", default=None,
+                   help="pitch mirrors at azimuth 0 (reference readings; default "
+                   "4,7.5,11,14.5,18)")
+    p.add_argument("--roll-mirror", choices=("right", "left"), default=None,
+                   help="side of the roll reference mirror (reference readings; right)")
+    p.add_argument("--no-reference-rows", action="store_true",
+                   help="write readings relative to the reference, without the reference rows")
+    p.add_argument("--n-azimuth", type=positive_int, default=None,
+                   help="absolute readings (default 7)")
+    p.add_argument("--n-pitch", type=positive_int, default=None,
+                   help="absolute readings (default 7)")
+    p.add_argument("--azimuth-span-deg", type=finite, default=None,
+                   help="absolute readings (default 90)")
+    p.add_argument("--pitch-span-deg", type=finite, default=None,
+                   help="absolute readings (default 60)")
     p.add_argument("--frame-heading-deg", type=finite, default=30.0)
     p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--ins-sigma-arcsec", type=nonnegative, default=2.0)

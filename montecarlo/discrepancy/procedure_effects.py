@@ -17,10 +17,11 @@ Candidates, absent when zero (the parametrisations of
   (``h_c`` the heading at the central mirror; a constant cancels in the relative readings);
 * ``ins_bias`` (``ins_heading_bias``, ``ins_pitch_bias`` [rad]): ``h + b_h``, ``p + b_p``;
 * ``theodolite_collimation`` (``theodolite_c`` [rad]): azimuths read ``az + c / cos(el)``;
-* ``reading_model`` (``reading_model`` [1], files without reference rows): the readings are
-  taken in the frame ``R_mu = A exp((1 - mu) log(A' R))``, ``A`` the level frame with the INS's
-  heading at the central mirror. ``mu = 0`` is the procedure, ``mu = 1`` absolute readings (a
-  level frame, up to a heading absorbed by ``reference_az``): data taken without the reference.
+* ``reading_model`` (``reading_tilt_x``, ``reading_tilt_y`` [rad], files without reference
+  rows): the readings refer to the procedure's frame ``R`` tilted about its x and y axes. Data
+  read without the reference (absolute readings, a level frame up to a heading) are this with
+  the tilt :func:`reference_tilt` (of the order of the offsets); a bilinear switch between the
+  two models would not be, and the engine adapts along linearised candidates.
 
 A bad mirror is found by the engine's data snooping (one observation per measured mirror). The
 residuals are whitened with the covariance propagated from the reading errors (theodolite and
@@ -74,8 +75,10 @@ def base_effect(reference_rows: bool) -> Effect:
                   "gamma, lambda and the theodolite azimuth of the central mirror [rad]")
 
 
-READING_MODEL = Effect("reading_model", ("reading_model",), ((-0.5, 1.5),), (1e-4,),
-                       "readings relative to the reference (0) or absolute (1) [1]", (1.0,))
+READING_MODEL = Effect("reading_model", ("reading_tilt_x", "reading_tilt_y"),
+                       ((-math.radians(1.0), math.radians(1.0)),) * 2, (1e-7,) * 2,
+                       "tilt of the frame the readings refer to, about its x and y [rad]",
+                       (1.0, 1.0))
 
 CANDIDATES = (*(c for c in ce.CANDIDATES if c.name not in ("axis_misalignment",)),
               READING_MODEL)
@@ -85,42 +88,34 @@ TRUTH_KEYS = tuple(p for c in CANDIDATES for p in c.parameters)
 
 
 def display_unit(name: str) -> tuple[str, float]:
-    if name in ("reference_az",):
+    if name == "reference_az":
         return "deg", math.pi / 180.0
-    if name == "reading_model":
-        return "1", 1.0
+    if name in READING_MODEL.parameters:
+        return "arcsec", ARCSEC
     return ce.display_unit(name)
 
 
-def _skew_exp(v: FloatArray) -> FloatArray:
-    """Rotation matrices of rotation vectors ``v`` (..., 3) (Rodrigues)."""
-    a = np.linalg.norm(v, axis=-1)[..., None, None]
-    K = np.zeros((*v.shape[:-1], 3, 3))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    K = K - np.swapaxes(K, -1, -2)
+def _tilt(tilt_x: ArrayLike, tilt_y: ArrayLike) -> FloatArray:
+    """Rotation by small angles about x and y: ``expm(skew([tx, ty, 0]))`` (Rodrigues)."""
+    tx, ty = np.broadcast_arrays(np.asarray(tilt_x, float), np.asarray(tilt_y, float))
+    a = np.hypot(tx, ty)[..., None, None]
+    K = np.zeros((*tx.shape, 3, 3))
+    K[..., 0, 2], K[..., 2, 0] = ty, -ty
+    K[..., 1, 2], K[..., 2, 1] = -tx, tx
     small = a < 1e-8
     s = np.where(small, 1.0 - a**2 / 6.0, np.sin(a) / np.where(small, 1.0, a))
     c = np.where(small, 0.5 - a**2 / 24.0, (1.0 - np.cos(a)) / np.where(small, 1.0, a) ** 2)
     return np.eye(3) + s * K + c * (K @ K)
 
 
-def _skew_log(M: FloatArray) -> FloatArray:
-    """Rotation vectors (..., 3) of rotation matrices (angles below pi)."""
-    a = np.arccos(np.clip((np.trace(M, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
-    v = 0.5 * np.stack([M[..., 2, 1] - M[..., 1, 2], M[..., 0, 2] - M[..., 2, 0],
-                        M[..., 1, 0] - M[..., 0, 1]], axis=-1)
-    small = a < 1e-8
-    return v * np.where(small, 1.0 + a**2 / 6.0, a / np.where(small, 1.0, np.sin(a)))[..., None]
-
-
 def relative_to_reference(heading: ArrayLike, pitch: ArrayLike, side: float,
-                          reading_model: ArrayLike = 0.0) -> tuple[FloatArray, FloatArray]:
+                          tilt: tuple[ArrayLike, ArrayLike] = (0.0, 0.0)
+                          ) -> tuple[FloatArray, FloatArray]:
     """Relative heading and pitch of pointings 2.. from absolute readings (..., n) [rad].
 
     Pointing 0 is the central, 1 the roll reference mirror; the frame is
-    :func:`montecarlo.seed003.reference.frame_from_axes` of the INS axes there, turned towards
-    the level frame of heading ``heading[0]`` by the fraction ``reading_model`` (module
-    docstring).
+    :func:`montecarlo.seed003.reference.frame_from_axes` of the INS axes there, turned by the
+    reading-frame ``tilt`` (about its x and y axes [rad]; the ``reading_model`` candidate).
 
     References
     ----------
@@ -128,14 +123,28 @@ def relative_to_reference(heading: ArrayLike, pitch: ArrayLike, side: float,
     """
     axes = direction(heading, pitch)
     frame = ref.frame_from_axes(axes[..., 0, :], axes[..., 1, :], side)
-    mu = np.asarray(reading_model, float)
-    if np.any(mu != 0.0):
-        h0 = np.asarray(heading, float)[..., 0]
-        level = ref.frame_from_axes(direction(h0, 0.0),
-                                    direction(ref.roll_mirror_azimuth(h0, side), 0.0), side)
-        turn = _skew_log(np.swapaxes(level, -1, -2) @ frame)
-        frame = level @ _skew_exp((1.0 - mu) * turn)
+    if np.any(np.asarray(tilt[0]) != 0.0) or np.any(np.asarray(tilt[1]) != 0.0):
+        # parameters come as (k, 1) per model, the frame is (k, 3, 3)
+        frame = frame @ _tilt(*(np.asarray(t, float)[..., 0] if np.ndim(t) else t
+                                for t in tilt))
     return azimuth_elevation(np.matmul(axes[..., 2:, :], frame))
+
+
+def reference_tilt(heading: ArrayLike, pitch: ArrayLike, side: float
+                   ) -> tuple[FloatArray, FloatArray]:
+    """The reading-frame tilt that turns the procedure's readings into absolute ones [rad].
+
+    The x and y components of the rotation vector of ``R^T L``, ``L`` the level frame with the
+    INS's heading at the central mirror (pointing 0): absolute readings are relative readings in
+    the frame ``R`` tilted by this (up to a heading, and to second order).
+    """
+    axes = direction(heading, pitch)
+    frame = ref.frame_from_axes(axes[..., 0, :], axes[..., 1, :], side)
+    h0 = np.asarray(heading, float)[..., 0]
+    level = ref.frame_from_axes(direction(h0, 0.0),
+                                direction(ref.roll_mirror_azimuth(h0, side), 0.0), side)
+    M = np.swapaxes(frame, -1, -2) @ level
+    return 0.5 * (M[..., 2, 1] - M[..., 1, 2]), 0.5 * (M[..., 0, 2] - M[..., 2, 0])
 
 
 def _pointings(params: Mapping[str, ArrayLike], data: MirrorData, side: float
@@ -214,8 +223,9 @@ def predict_relative(params: Mapping[str, ArrayLike], data: MirrorData, side: fl
                      ) -> tuple[FloatArray, FloatArray]:
     """Relative heading and pitch at the measured mirrors, shapes (..., m) [rad]."""
     heading, pitch = reported_attitudes(params, data, side)
+    p = _getter(params)
     return relative_to_reference(heading, pitch, side,
-                                 np.asarray(params.get("reading_model", 0.0), float))
+                                 (p("reading_tilt_x"), p("reading_tilt_y")))
 
 
 def observed_relative(data: MirrorData, side: float = 1.0) -> tuple[FloatArray, FloatArray]:
@@ -317,7 +327,7 @@ def simulate(layout: MirrorData, truth: Mapping[str, float], noise: Noise,
     :func:`reported_attitudes` plus its errors (heading also turned by ``frame_heading``). With
     reference rows in ``layout`` the file holds these absolute readings (roll column if the
     layout has one); without, the relative readings the INS computes from its erroneous reports
-    (:func:`relative_to_reference`, ``reading_model`` from ``truth``), no roll column; the
+    (:func:`relative_to_reference`, the reading-frame tilt from ``truth``), no roll column; the
     reference pointings at ``truth["reference_az"]``. Theodolite azimuths read
     ``+ c / cos(el)``; every theodolite reading gets ``noise.theodolite``.
     """
@@ -345,9 +355,8 @@ def simulate(layout: MirrorData, truth: Mapping[str, float], noise: Noise,
         return dataclasses.replace(layout, theodolite_az=wrap(theo_az), theodolite_el=theo_el,
                                    ins_az=ins_az, ins_el=ins_el, ins_roll=roll)
     rel_h, rel_p = relative_to_reference(heading, pitch, side,
-                                         float(truth.get("reading_model", 0.0)))
-    if truth.get("reading_model", 0.0):
-        rel_h = rel_h + frame_heading
+                                         (truth.get("reading_tilt_x", 0.0),
+                                          truth.get("reading_tilt_y", 0.0)))
     return dataclasses.replace(layout, theodolite_az=wrap(theo_az), theodolite_el=theo_el,
                                ins_az=wrap(rel_h), ins_el=rel_p, ins_roll=None)
 
@@ -390,7 +399,7 @@ def report_view(data: MirrorData, angle_sigma: float, side: float = 1.0) -> Syst
     def study_params(fit: LeastSquaresFit) -> dict[str, object]:
         values = fit.params
         return {"layout": layout, "readings": "reference",
-                "theodolite_sigma": angle_sigma / math.sqrt(2.0),
+                "roll_mirror": side, "theodolite_sigma": angle_sigma / math.sqrt(2.0),
                 "ins_sigma": angle_sigma / math.sqrt(2.0), "mount_roll_sigma": 0.0,
                 **{q: float(values.get(q, 0.0)) for q in ("axis_az", "axis_el",
                                                           "reference_az", *TRUTH_KEYS)},
