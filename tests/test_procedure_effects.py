@@ -252,3 +252,40 @@ def test_diagnose_reads_reference_rows_only_under_the_procedure(tmp_path, capsys
     assert "--roll-mirror: only with --readings reference" in capsys.readouterr().err
     assert main(["diagnose", "collimation", str(data), "--angle-sigma-arcsec", "2.83"]) == 0
     assert "no missing effect" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------- acceptance (slow)
+
+REFERENCE = {"readings": "reference", "diagnose": 1, "axis_az": 300 * AS, "axis_el": 200 * AS}
+RELATIVE = json.dumps(pe.paper_layout(False).layout())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("extra", [{}, {"layout": RELATIVE}])
+def test_null_procedure_data_name_nothing_in_98_percent(extra):
+    """>= 98 % of 200 null calibrations: no effect named and no mirror flagged."""
+    out = sd.run_collimation_trials({**REFERENCE, **extra}, np.random.default_rng(21), 200)
+    clean = (out["named_any"] == 0) & (out["n_flagged"] == 0)
+    assert clean.mean() >= 0.98
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("expected", "extra"), [
+    ("ins_scale_factor", {}), ("ins_scale_factor", {"layout": RELATIVE}),
+    ("reading_model", {"layout": RELATIVE})])
+def test_candidates_at_twice_their_mdb_are_named_in_most_sets(expected, extra):
+    out = sd.run_collimation_trials({**REFERENCE, **extra, "expected": expected,
+                                     "inject_mdb": 2.0}, np.random.default_rng(22), 60)
+    assert out["named_expected"].mean() > 0.5
+
+
+@pytest.mark.slow
+def test_absolute_readings_analysed_as_the_procedure_name_the_reading_model():
+    from montecarlo.discrepancy.design import score_trials
+
+    layout = ce.paper_mirrors(5, 5, math.radians(75.0), math.radians(18.0))
+    truth = {"frame_heading": math.radians(30.0), "axis_az": 300 * AS, "axis_el": 200 * AS}
+    out = score_trials(lambda g: ce.simulate(layout, truth, Noise(), g),
+                       lambda d: pe.procedure_problem(d, SIGMA), lambda d, f: 0.0, truth, (),
+                       True, "reading_model", 0.01, np.random.default_rng(23), 60)
+    assert out["named_expected"].mean() >= 0.95
