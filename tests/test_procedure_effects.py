@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from montecarlo.discrepancy import procedure_effects as pe
 from montecarlo.discrepancy.design import inject_at_mdb
 from montecarlo.discrepancy.engine import analyse_candidates, diagnose
 from montecarlo.discrepancy.fit import fit_model
-from montecarlo.io.collimation_csv import procedure_data, read_mirror_csv, write_mirror_csv
+from montecarlo.io.collimation_csv import procedure_data, read_mirror_csv
 from montecarlo.seed003 import reference as ref
 from montecarlo.seed003.model import Noise
 from montecarlo.seed003.procedure import fit_procedure, simulate_procedure
@@ -197,29 +198,33 @@ def test_synth_then_diagnose_by_the_procedure(tmp_path, capsys, flags):
     capsys.readouterr()
 
 
-def test_absolute_readings_option_keeps_the_old_diagnosis(tmp_path, capsys):
-    """--readings absolute: the same data and numbers as the absolute-reading model's own
-    functions (synth_collimation, collimation_problem)."""
-    from montecarlo.discrepancy import synth
+GOLDEN = Path(__file__).parent / "data" / "discrepancy"
 
+
+def _close(a, b):
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) and isinstance(b, float):
+        return a == pytest.approx(b, rel=1e-7, abs=1e-12, nan_ok=True)
+    return a == b
+
+
+def test_absolute_readings_option_keeps_the_old_output(tmp_path, capsys):
+    """--readings absolute: the file and the diagnosis the two commands gave before the
+    procedure became the default (kept under tests/data/discrepancy/)."""
     data, out = tmp_path / "a.csv", tmp_path / "a.json"
     assert main(["synth", "collimation", str(data), "--readings", "absolute", "--seed", "4",
-                 "--effect", "axis_misalignment=100,50"]) == 0
-    made, _ = synth.synth_collimation(seed=4, n_azimuth=7, n_pitch=7,
-                                      azimuth_span=math.radians(90), pitch_span=math.radians(60),
-                                      frame_heading=math.radians(30), noise=Noise(),
-                                      effects={"axis_az": 100 * AS, "axis_el": 50 * AS},
-                                      at_mdb={})
-    expected = tmp_path / "e.csv"
-    write_mirror_csv(expected, made)
-    assert data.read_text() == expected.read_text()
+                 "--effect", "axis_misalignment=100,50", "--effect", "ins_scale_factor=300,0"]) == 0
+    assert data.read_text() == (GOLDEN / "absolute_seed4.csv").read_text()
     assert main(["diagnose", "collimation", str(data), "--readings", "absolute",
                  "--angle-sigma-arcsec", "2.83", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
-    d = diagnose(ce.collimation_problem(read_mirror_csv(data), 2.83 * AS))
-    assert [e["name"] for e in report["named_effects"]] == d.named == ["axis_misalignment"]
-    got = report["named_effects"][0]["parameters"]
-    assert got["axis_az"] == pytest.approx(d.after.params["axis_az"] / AS, rel=1e-9)
+    golden = json.loads((GOLDEN / "absolute_seed4.json").read_text())
+    assert [e["name"] for e in golden["named_effects"]] == ["axis_misalignment",
+                                                            "ins_scale_factor"]
+    assert _close({k: report[k] for k in golden}, golden)
     capsys.readouterr()
 
 
