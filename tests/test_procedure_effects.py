@@ -180,7 +180,7 @@ def test_study_system_runs_the_procedure():
 # --------------------------------------------------------------------------- command line
 
 
-@pytest.mark.parametrize("flags", [[], ["--no-reference-rows"]])
+@pytest.mark.parametrize("flags", [[], ["--no-reference-rows"], ["--roll-mirror", "left"]])
 def test_synth_then_diagnose_by_the_procedure(tmp_path, capsys, flags):
     data, out, truth = tmp_path / "p.csv", tmp_path / "d.json", tmp_path / "t.json"
     assert main(["synth", "collimation", str(data), "--seed", "3", "--effect",
@@ -188,11 +188,14 @@ def test_synth_then_diagnose_by_the_procedure(tmp_path, capsys, flags):
                  str(truth), *flags]) == 0
     made = json.loads(truth.read_text())
     assert made["readings"] == "reference" and made["truth"]["axis_az"] == pytest.approx(300)
-    sets = read_mirror_csv(data, sets=("azimuth", "pitch", "reference_center",
-                                       "reference_roll")).sets
-    assert ("reference_center" in sets) == (not flags)
+    read = read_mirror_csv(data, sets=("azimuth", "pitch", "reference_center",
+                                       "reference_roll"))
+    assert ("reference_center" in read.sets) == ("--no-reference-rows" not in flags)
+    side = flags[1:] if "--roll-mirror" in flags else []
+    if side:
+        assert read.theodolite_az[1] == pytest.approx(-math.pi / 2, abs=1e-4)
     assert main(["diagnose", "collimation", str(data), "--angle-sigma-arcsec", "2.83",
-                 "--json", str(out)]) == 0
+                 "--json", str(out), *(["--roll-mirror", *side] if side else [])]) == 0
     report = json.loads(out.read_text())
     assert [e["name"] for e in report["named_effects"]] == ["ins_scale_factor"]
     capsys.readouterr()

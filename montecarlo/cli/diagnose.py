@@ -266,10 +266,11 @@ def _synth_procedure(args: argparse.Namespace) -> int:
     ins = args.ins_sigma_arcsec * ARCSEC
     noise = Noise(args.theodolite_sigma_arcsec * ARCSEC, ins, ins, ins,
                   math.radians(args.mount_roll_sigma_deg))
+    side = SIDES[args.roll_mirror or "right"]
     data, truth = synth.synth_procedure(
-        seed=args.seed, layout=pe.paper_layout(rows, azimuths, pitches),
+        seed=args.seed, layout=pe.paper_layout(rows, azimuths, pitches, side),
         frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
-        at_mdb=at_mdb, side=SIDES[args.roll_mirror or "right"],
+        at_mdb=at_mdb, side=side,
         with_roll=args.with_roll or (rows and args.mount_roll_sigma_deg > 0))
     write_mirror_csv(args.out, data)
     sigma = math.hypot(args.theodolite_sigma_arcsec, args.ins_sigma_arcsec)

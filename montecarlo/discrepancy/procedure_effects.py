@@ -369,9 +369,9 @@ def exact_problem(layout: MirrorData, truth: Mapping[str, float], angle_sigma: f
 
 
 def paper_layout(reference_rows: bool = True, azimuths: ArrayLike | None = None,
-                 pitches: ArrayLike | None = None) -> MirrorData:
+                 pitches: ArrayLike | None = None, side: float = 1.0) -> MirrorData:
     """The paper-like layout of the procedure, no readings: reference mirrors C (0, 0) and R
-    (90 deg, 0) when ``reference_rows``, 5 azimuth and 5 pitch mirrors
+    (s 90 deg, 0) when ``reference_rows``, 5 azimuth and 5 pitch mirrors
     (:func:`montecarlo.seed003.procedure.procedure_layout`)."""
     from montecarlo.seed003.procedure import PAPER_AZIMUTHS, PAPER_PITCHES, procedure_layout
 
@@ -381,7 +381,7 @@ def paper_layout(reference_rows: bool = True, azimuths: ArrayLike | None = None,
         [f"P{i + 1}" for i in range(sets.count("pitch"))]
     kinds = list(sets)
     if reference_rows:
-        az = np.concatenate([[0.0, math.pi / 2], az])
+        az = np.concatenate([[0.0, side * math.pi / 2], az])
         el = np.concatenate([[0.0, 0.0], el])
         names, kinds = ["C", "R", *names], ["reference_center", "reference_roll", *kinds]
     zero = np.zeros_like(az)

@@ -266,7 +266,8 @@ def _procedure_trials(p: Mapping[str, Any], rng: np.random.Generator, n: int
                       ) -> dict[str, FloatArray]:
     """:func:`run_collimation_trials` under ``readings = "reference"``."""
     side = float(p["roll_mirror"])
-    layout = (pe.paper_layout() if not p["layout"] else MirrorData.from_layout(str(p["layout"])))
+    layout = (pe.paper_layout(side=side) if not p["layout"]
+              else MirrorData.from_layout(str(p["layout"])))
     ins = float(p["ins_sigma"])
     noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
     sigma = math.hypot(noise.theodolite, ins)
