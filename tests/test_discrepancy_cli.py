@@ -47,10 +47,10 @@ def test_ground_hidden_focal_scale_is_named_and_the_gap_shrinks(tmp_path):
 def test_collimation_axis_offsets_named_collimation_absorbed_with_report(tmp_path):
     data, rep = tmp_path / "c.csv", tmp_path / "rep"
     sim = run_cli("synth", "collimation", data, "--seed", 2, "--effect",
-                  "axis_misalignment=180,-120")
+                  "axis_misalignment=180,-120", "--readings", "absolute")
     assert sim.returncode == 0, sim.stderr
     diag = run_cli("diagnose", "collimation", data, "--angle-sigma-arcsec", "2.83", "--report",
-                   rep, "--trials", 8)
+                   rep, "--trials", 8, "--readings", "absolute")
     assert diag.returncode == 0, diag.stderr
     report = json.loads((rep / "diagnosis.json").read_text())
     assert report["named_effects"][0]["name"] == "axis_misalignment"
@@ -98,7 +98,7 @@ COLLIMATION_OK = ("mirror,set,theodolite_az_deg,theodolite_el_deg,ins_az_deg,ins
     ("collimation", COLLIMATION_OK.replace("P1,pitch", "P1,roll"), "row 4, column 'set'"),
     ("collimation", COLLIMATION_OK.replace(",30,30,30", ",30,,30"), "row 4, column 'ins_az_deg'"),
     ("collimation", COLLIMATION_OK.replace("ins_el_deg", "ins_pitch"), "missing column 'ins_el"),
-    ("collimation", "\n".join(COLLIMATION_OK.splitlines()[:2]) + "\n", "1 data rows, at least 2"),
+    ("collimation", "\n".join(COLLIMATION_OK.splitlines()[:2]) + "\n", "1 data rows, at least 3"),
 ])
 def test_malformed_csv_exits_2_with_one_line(tmp_path, capsys, system, text, where):
     data, out = tmp_path / "bad.csv", tmp_path / "out.json"

@@ -112,9 +112,13 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     from montecarlo.io.collimation_csv import read_mirror_csv
 
     _check_outputs(args)
+    sigma = args.angle_sigma_arcsec * ARCSEC
+    if args.readings == "reference":
+        return _diagnose_procedure(args, sigma)
+    if args.roll_mirror is not None:
+        raise InputError("--roll-mirror: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
-    sigma = args.angle_sigma_arcsec * ARCSEC
     try:
         d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
@@ -150,6 +154,29 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         return 0
     print(format_text(report))
     return 0
+
+
+def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
+    """``diagnose collimation --readings reference``: the procedure's reading model as base."""
+    from montecarlo.discrepancy import procedure_effects as pe
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.fit import FitError
+    from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, read_mirror_csv
+    from montecarlo.seed003.reference import SIDES
+
+    data = read_mirror_csv(args.data, pe.min_mirrors(), "gamma, lambda (+ reference azimuth) "
+                           "+ up to 2 parameters of an effect + 1 degree of freedom",
+                           sets=SETS + REFERENCE_SETS)
+    side = SIDES[args.roll_mirror or "right"]
+    measured = sum(s in SETS for s in data.sets)
+    if measured < pe.min_mirrors():
+        raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
+                         f"{pe.min_mirrors()} needed")
+    try:
+        d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
+    except FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data))
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:
@@ -202,6 +229,25 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
     from montecarlo.seed003.model import Noise
 
     _check_files(args)
+    absolute_only = {"--n-azimuth": args.n_azimuth, "--n-pitch": args.n_pitch,
+                     "--azimuth-span-deg": args.azimuth_span_deg,
+                     "--pitch-span-deg": args.pitch_span_deg}
+    if args.readings == "reference":
+        given = [k for k, v in absolute_only.items() if v is not None]
+        if given:
+            raise InputError(f"{', '.join(given)}: only with --readings absolute (the "
+                             "procedure's mirrors are --azimuths-deg, --pitch-elevations-deg)")
+        return _synth_procedure(args)
+    for flag, used in (("--no-reference-rows", args.no_reference_rows),
+                       ("--roll-mirror", args.roll_mirror),
+                       ("--azimuths-deg", args.azimuths_deg),
+                       ("--pitch-elevations-deg", args.pitch_elevations_deg)):
+        if used:
+            raise InputError(f"{flag}: only with --readings reference")
+    for key, default in (("n_azimuth", 7), ("n_pitch", 7), ("azimuth_span_deg", 90.0),
+                         ("pitch_span_deg", 60.0)):
+        if getattr(args, key) is None:
+            setattr(args, key, default)
     candidates = {c.name: c for c in ce.CANDIDATES}
     effects = synth.parse_effects(args.effect, candidates, ce.display_unit)
     at_mdb = synth.parse_multiples(args.at_mdb, candidates)
@@ -231,6 +277,55 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
 def refraction_option(p: argparse.ArgumentParser, text: str) -> None:
     p.add_argument("--refraction-k", type=number(float, low=-5.0, high=5.0), default=0.13,
                    metavar="K", help=f"{text} [1] (default 0.13, Gauss's standard value)")
+
+
+def _synth_procedure(args: argparse.Namespace) -> int:
+    """``synth collimation --readings reference``: one calibration by the paper's procedure."""
+    from montecarlo.cli.collimation import _angle_list
+    from montecarlo.discrepancy import collimation_effects as ce
+    from montecarlo.discrepancy import procedure_effects as pe
+    from montecarlo.discrepancy import synth
+    from montecarlo.io.collimation_csv import write_mirror_csv
+    from montecarlo.seed003.model import Noise
+    from montecarlo.seed003.reference import SIDES
+
+    rows = not args.no_reference_rows
+    if args.with_roll and not rows:
+        raise InputError("--with-roll: only with reference rows (relative files carry no roll)")
+    azimuths = _angle_list("--azimuths-deg", args.azimuths_deg or "-30,-15,15,30,45")
+    pitches = _angle_list("--pitch-elevations-deg", args.pitch_elevations_deg
+                          or "4,7.5,11,14.5,18")
+    if len(azimuths) + len(pitches) < pe.min_mirrors():
+        raise InputError(f"--azimuths-deg, --pitch-elevations-deg: at least {pe.min_mirrors()} "
+                         "mirrors needed")
+    axis = next(c for c in ce.CANDIDATES if c.name == "axis_misalignment")
+    candidates = {axis.name: axis, **{c.name: c for c in pe.CANDIDATES}}
+    effects = synth.parse_effects(args.effect, candidates, pe.display_unit)
+    at_mdb = synth.parse_multiples(args.at_mdb, {c.name: c for c in pe.CANDIDATES})
+    ins = args.ins_sigma_arcsec * ARCSEC
+    noise = Noise(args.theodolite_sigma_arcsec * ARCSEC, ins, ins, ins,
+                  math.radians(args.mount_roll_sigma_deg))
+    side = SIDES[args.roll_mirror or "right"]
+    data, truth = synth.synth_procedure(
+        seed=args.seed, layout=pe.paper_layout(rows, azimuths, pitches, side),
+        frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
+        at_mdb=at_mdb, side=side,
+        with_roll=args.with_roll or (rows and args.mount_roll_sigma_deg > 0))
+    write_mirror_csv(args.out, data)
+    sigma = math.hypot(args.theodolite_sigma_arcsec, args.ins_sigma_arcsec)
+    if args.truth:
+        write_text(args.truth, synth.truth_report(
+            "collimation", args.seed, truth, pe.display_unit, angle_sigma_arcsec=sigma,
+            readings="reference", reference_rows=rows, roll_mirror=args.roll_mirror or "right"))
+    shown = {k: v / pe.display_unit(k)[1] for k, v in truth.items()
+             if k != "frame_heading" and v != 0.0}
+    print(f"wrote {args.out}: {len(data.mirror)} rows ("
+          + ("absolute readings with the two reference rows" if rows
+             else "readings relative to the reference") + f"), seed {args.seed}; diagnose with "
+          f"--angle-sigma-arcsec {sigma:.4g}; injected: "
+          + (", ".join(f"{k} = {v:.4g}{_unit(pe.display_unit(k)[0])}" for k, v in shown.items())
+             or "nothing"))
+    return 0
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
@@ -270,6 +365,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    "ins_az_deg, ins_el_deg[, ins_roll_deg]")
     p.add_argument("--angle-sigma-arcsec", type=positive, required=True, metavar="S",
                    help="standard deviation of each heading and pitch residual [arc-seconds]")
+    p.add_argument("--readings", choices=("reference", "absolute"), default="reference",
+                   help="reference (default): the paper's procedure, readings relative to the "
+                   "INS's reference (reference rows, or relative readings); absolute: the "
+                   "absolute-reading model")
+    p.add_argument("--roll-mirror", choices=("right", "left"), default=None,
+                   help="side of the roll reference mirror (--readings reference; right)")
     common(p)
     p.set_defaults(func=_cmd_diagnose_collimation)
 
@@ -331,10 +432,27 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = ssub.add_parser("collimation", help="seed 003 fixture: azimuth and pitch mirrors")
     effect_options(p)
-    p.add_argument("--n-azimuth", type=positive_int, default=7)
-    p.add_argument("--n-pitch", type=positive_int, default=7)
-    p.add_argument("--azimuth-span-deg", type=finite, default=90.0)
-    p.add_argument("--pitch-span-deg", type=finite, default=60.0)
+    p.add_argument("--readings", choices=("reference", "absolute"), default="reference",
+                   help="reference (default): the paper's procedure (reference mirrors at 0 and "
+                   "±90°, --azimuths-deg, --pitch-elevations-deg); absolute: the "
+                   "absolute-reading model on --n-azimuth/--n-pitch mirrors")
+    p.add_argument("--azimuths-deg", default=None,
+                   help="horizontal mirrors (reference readings; default -30,-15,15,30,45)")
+    p.add_argument("--pitch-elevations-deg", default=None,
+                   help="pitch mirrors at azimuth 0 (reference readings; default "
+                   "4,7.5,11,14.5,18)")
+    p.add_argument("--roll-mirror", choices=("right", "left"), default=None,
+                   help="side of the roll reference mirror (reference readings; right)")
+    p.add_argument("--no-reference-rows", action="store_true",
+                   help="write readings relative to the reference, without the reference rows")
+    p.add_argument("--n-azimuth", type=positive_int, default=None,
+                   help="absolute readings (default 7)")
+    p.add_argument("--n-pitch", type=positive_int, default=None,
+                   help="absolute readings (default 7)")
+    p.add_argument("--azimuth-span-deg", type=finite, default=None,
+                   help="absolute readings (default 90)")
+    p.add_argument("--pitch-span-deg", type=finite, default=None,
+                   help="absolute readings (default 60)")
     p.add_argument("--frame-heading-deg", type=finite, default=30.0)
     p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, default=2.0)
     p.add_argument("--ins-sigma-arcsec", type=nonnegative, default=2.0)

@@ -23,6 +23,7 @@ import numpy as np
 
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy import procedure_effects as pe
 from montecarlo.discrepancy.design import inject_at_mdb
 from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.errors import InputError
@@ -144,6 +145,28 @@ def synth_collimation(*, seed: int, n_azimuth: int, n_pitch: int, azimuth_span: 
     truth = _inject(lambda tr: ce.exact_problem(layout, tr, sigma), truth, at_mdb)
     data = ce.simulate(layout, truth, noise, np.random.SeedSequence(seed).spawn(2)[1])
     return data, truth
+
+
+def synth_procedure(*, seed: int, layout: MirrorData, frame_heading: float, noise: Noise,
+                    effects: Mapping[str, float], at_mdb: Mapping[str, float], side: float = 1.0,
+                    with_roll: bool = False) -> tuple[MirrorData, dict[str, float]]:
+    """One calibration by seed 003's procedure on ``layout`` (reference rows or not), the
+    readings of :func:`montecarlo.discrepancy.procedure_effects.simulate`.
+
+    ``effects`` may hold the offsets ``axis_az``, ``axis_el`` (base parameters of the
+    procedure) and any candidate's parameters. The MDB of ``--at-mdb`` is for the residual sigma
+    ``hypot(theodolite, INS heading)`` the diagnosis should be told.
+    """
+    if with_roll:
+        layout = MirrorData(layout.mirror, layout.sets, layout.theodolite_az,
+                            layout.theodolite_el, layout.ins_az, layout.ins_el,
+                            np.zeros_like(layout.ins_az))
+    sigma = math.hypot(noise.theodolite, noise.ins_heading)
+    truth = {"axis_az": 0.0, "axis_el": 0.0, **effects}
+    truth = _inject(lambda tr: pe.exact_problem(layout, tr, sigma, side), truth, at_mdb)
+    data = pe.simulate(layout, truth, noise, np.random.SeedSequence(seed).spawn(2)[1], side,
+                       frame_heading)
+    return data, {"frame_heading": frame_heading, **truth}
 
 
 def truth_report(system: str, seed: int, truth: Mapping[str, float],

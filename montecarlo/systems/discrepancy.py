@@ -19,13 +19,14 @@ from numpy.typing import NDArray
 
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy import procedure_effects as pe
 from montecarlo.discrepancy.design import TRIAL_METRICS, inject_at_mdb, score_trials
 from montecarlo.discrepancy.engine import ALPHA, Diagnosis
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.engine.system import Metric
 from montecarlo.geometry.camera import Camera
-from montecarlo.io.collimation_csv import MirrorData
+from montecarlo.io.collimation_csv import MirrorData, procedure_data
 from montecarlo.io.ground_csv import GroundData
 from montecarlo.seed003.model import Noise
 from montecarlo.systems.params import ParamSystem, study_params
@@ -184,6 +185,8 @@ COLLIMATION_DEFAULTS: dict[str, float | int | str] = {
     **dict.fromkeys(ce.TRUTH_KEYS, 0.0),
     "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
     "n_outliers": 0, "outlier_size": 0.0,
+    "readings": "absolute", "reference_az": 0.0, "reading_tilt_x": 0.0, "reading_tilt_y": 0.0,
+    "roll_mirror": 1.0,
 }
 """Defaults of :func:`run_collimation_trials` (SI units, radians); see its docstring."""
 
@@ -210,6 +213,13 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
         :func:`run_ground_trials`. ``n_outliers`` [count] (0): mirrors whose theodolite
         reading is off by ``outlier_size`` [multiples of the per-component noise] in a random
         direction.
+        ``readings`` [text] ("absolute"): "reference" simulates and diagnoses by seed 003's
+        procedure (:mod:`montecarlo.discrepancy.procedure_effects`; ``layout`` "" for its
+        paper-like layout with reference rows; ``axis_az``, ``axis_el`` are then base
+        parameters, ``reference_az`` [rad] (0) the central mirror's theodolite azimuth of
+        relative-reading layouts, ``reading_tilt_x``, ``reading_tilt_y`` [rad] (0) the
+        ``reading_model`` candidate, ``roll_mirror`` +1
+        right or -1 left; ``frame_heading`` turns the absolute readings).
     rng : numpy Generator, the only source of randomness.
     n : number of simulated calibrations.
 
@@ -223,6 +233,10 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
     if unknown:
         raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
     p = {**COLLIMATION_DEFAULTS, **params}
+    if p["readings"] == "reference":
+        return _procedure_trials(p, rng, n)
+    if p["readings"] != "absolute":
+        raise ValueError(f"readings must be 'reference' or 'absolute', not {p['readings']!r}")
     layout = (ce.paper_mirrors(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
                             float(p["pitch_span"]))
               if not p["layout"] else MirrorData.from_layout(str(p["layout"])))
@@ -254,6 +268,40 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
         watched=("theodolite_collimation",), spoil=spoil if count else None)
 
 
+def _procedure_trials(p: Mapping[str, Any], rng: np.random.Generator, n: int
+                      ) -> dict[str, FloatArray]:
+    """:func:`run_collimation_trials` under ``readings = "reference"``."""
+    side = float(p["roll_mirror"])
+    layout = (pe.paper_layout(side=side) if not p["layout"]
+              else MirrorData.from_layout(str(p["layout"])))
+    ins = float(p["ins_sigma"])
+    noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
+    sigma = math.hypot(noise.theodolite, ins)
+    truth = {k: float(p[k]) for k in ("axis_az", "axis_el", "reference_az", *pe.TRUTH_KEYS)}
+    effects = tuple(e.strip() for e in str(p["fit_effects"]).split(",") if e.strip())
+    truth = _inject(lambda tr: pe.exact_problem(layout, tr, sigma, side), truth, p)
+    count, size = int(p["n_outliers"]), float(p["outlier_size"]) * sigma
+    heading = float(p["frame_heading"])
+
+    def spoil(data: MirrorData, g: np.random.Generator) -> tuple[MirrorData, set[str]]:
+        measured = procedure_data(data).measured
+        rows = g.choice(measured, count, replace=False)
+        shift = size * _directions(g, count)
+        az, el = data.theodolite_az.copy(), data.theodolite_el.copy()
+        az[rows] += shift[:, 0] / np.cos(el[rows])  # a misreading of the theodolite
+        el[rows] += shift[:, 1]
+        return (dataclasses.replace(data, theodolite_az=az, theodolite_el=el),
+                {data.mirror[r] for r in rows})
+
+    return score_trials(
+        lambda g: pe.simulate(layout, truth, noise, g, side, heading),
+        lambda data: pe.procedure_problem(data, sigma, side),
+        lambda data, fit: float(np.sqrt(np.mean(pe.raw_residuals(data, fit.params, side)
+                                                ** 2))),
+        truth, effects, int(p["diagnose"]), str(p["expected"]), float(p["alpha"]), rng, n,
+        watched=("reading_model",), spoil=spoil if count else None)
+
+
 COLLIMATION = ParamSystem(
     name="discrepancy_collimation",
     run_trials=run_collimation_trials,
@@ -262,7 +310,8 @@ COLLIMATION = ParamSystem(
            "ins_sigma": "arcsec", "mount_roll_sigma": "deg", "frame_heading": "deg",
            "axis_az": "arcsec", "axis_el": "arcsec", "frame_tilt_x": "arcsec",
            "frame_tilt_y": "arcsec", "ins_heading_bias": "arcsec", "ins_pitch_bias": "arcsec",
-           "theodolite_c": "arcsec"},
+           "theodolite_c": "arcsec", "reference_az": "deg", "reading_tilt_x": "arcsec",
+           "reading_tilt_y": "arcsec"},
     metrics_=(
         Metric("chi2", "χ² of the fitted model", "1", 1.0),
         Metric("chi2_red", "reduced χ² of the fitted model", "1", 1.0),
