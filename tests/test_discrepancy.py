@@ -6,6 +6,7 @@ its distribution under the base model is chi2(q) (checked by Monte Carlo), and i
 noncentrality at the MDB is lambda0 (Baarda).
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -23,6 +24,7 @@ from montecarlo.discrepancy.engine import (
     log_chi2_sf,
     log_chi2_sf_asymptotic,
     noncentrality,
+    separated,
 )
 from montecarlo.discrepancy.fit import fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem
@@ -286,3 +288,101 @@ def test_holm_adjusted_p_values_reach_the_report_json():
     named = report["named_effects"][0]
     assert named["p_value"] == next(c["p_adjusted"] for c in family if c["name"] == "cubic")
     assert named["p_value"] != next(c["p_value"] for c in family if c["name"] == "cubic")
+
+
+def bend_problem(y: np.ndarray) -> Problem:
+    """The line plus one two-parameter candidate: a tilt 3 x (the slope's column: absorbed)
+    and a bow x^2 (bounded at 100, the tilt at 1)."""
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    bend = Effect("bend", ("c_tilt", "c_bow"), ((-1.0, 1.0), (-100.0, 100.0)), (1e-3, 1e-3))
+
+    def residuals(v):
+        a, b, t, q = (np.asarray(v.get(k, 0.0), float) for k in ("a", "b", "c_tilt", "c_bow"))
+        return y - (a + b * X + t * 3.0 * X + q * X**2)
+
+    return Problem("toy", base, (bend,), residuals, {"a": 0.0, "b": 0.0})
+
+
+def test_a_candidate_with_one_absorbed_parameter_enters_with_the_other_only():
+    """The tilt cannot be estimated beside the slope: the adapted model is the line plus the
+    bow, whose fit equals numpy's lstsq on (1, x, x^2)."""
+    rng = np.random.default_rng(4)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + rng.standard_normal(X.size)
+    d = diagnose(bend_problem(y))
+    test = next(t for t in d.steps[0].tests if t.name == "bend")
+    assert test.active == ("c_bow",) and test.absorbed_by == {"c_tilt": ["b"]}
+    assert d.named == ["bend"] and not d.unexplained
+    assert d.after.names == ("a", "b", "c_bow")
+    chi2, coef = chi2_of([np.ones_like(X), X, X**2], y)
+    assert d.after.chi2 == pytest.approx(chi2, rel=1e-9)
+    np.testing.assert_allclose(d.after.values, coef, rtol=1e-7)
+    result = d.effect_result("bend")
+    assert result["parameters"] == {"c_bow": d.after.params["c_bow"]}
+    assert result["stderr"] == {"c_bow": d.after.stderr["c_bow"]}
+
+
+def test_effect_result_of_a_named_effect():
+    rng = np.random.default_rng(2)
+    y = 0.3 + 0.5 * X + 1.6 * X**3 + 0.3 * rng.standard_normal(X.size)
+    d = diagnose(toy_problem(y, sigma=0.3))
+    test = next(t for t in d.steps[0].tests if t.name == "cubic")
+    assert d.effect_result("cubic") == {
+        "name": "cubic", "parameters": {"c_cubic": d.after.params["c_cubic"]},
+        "stderr": {"c_cubic": d.after.stderr["c_cubic"]}, "p_value": test.p_adjusted,
+        "p_value_unadjusted": test.p_value, "statistic": test.statistic, "dof": 1}
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 4, 5, 6, 8, 10])
+def test_log_chi2_sf_tail_series_is_within_its_first_omitted_term(dof):
+    """Three terms of the series of Gamma(a, y): exact for a = 1, 2, 3 (dof 2, 4, 6), otherwise
+    off by about the first omitted term (a-1)(a-2)(a-3)/y^3 (scipy as the reference)."""
+    a = dof / 2.0
+    for x in (60.0, 200.0, 1000.0):
+        y = x / 2.0
+        omitted = abs((a - 1.0) * (a - 2.0) * (a - 3.0)) / y**3
+        got, exact = log_chi2_sf_asymptotic(x, dof), stats.chi2.logsf(x, dof)
+        assert abs(got - exact) <= 2.0 * omitted + 1e-12 * abs(exact)
+
+
+def test_canonical_correlation_limits():
+    problem = toy_problem(0.3 + 0.5 * X)
+    tests = {t.name: t for t in analyse_candidates(problem, fit_model(problem, ()))}
+    quadratic = tests["quadratic"]
+    assert canonical_correlation(quadratic, quadratic) == 1.0  # never above one
+    assert tests["duplicate"].basis is None  # absorbed: no column space
+    assert canonical_correlation(quadratic, tests["duplicate"]) == 0.0
+    assert canonical_correlation(tests["duplicate"], quadratic) == 0.0
+    empty = dataclasses.replace(quadratic, basis=np.zeros((X.size, 0)))
+    assert canonical_correlation(quadratic, empty) == canonical_correlation(empty, quadratic) \
+        == 0.0
+
+
+def test_a_partner_that_absorbs_the_winner_is_never_separated_from_it():
+    """Winner column 10 e1; the partner's column at 3 % off it, so the winner keeps 3 % of its
+    norm beside the partner (below ``absorbed``): not separated however large the residual
+    along the winner's own direction; at 30 % off the same residual separates them."""
+    rng = np.random.default_rng(0)
+    e = np.linalg.qr(rng.standard_normal((X.size, 2)))[0]
+    winner = dataclasses.replace(analyse_candidates(toy_problem(0 * X), fit_model(
+        toy_problem(0 * X), ()))[0], projected=10.0 * e[:, :1], basis=e[:, :1])
+    for off, expected in ((0.03, False), (0.3, True)):
+        u = (math.sqrt(1 - off**2) * e[:, 0] + off * e[:, 1])[:, None]
+        partner = dataclasses.replace(winner, basis=u, projected=u)
+        residual = 100.0 * (e[:, 0] - u[:, 0] * u[:, 0] @ e[:, 0])
+        residual /= np.linalg.norm(residual) / 100.0
+        assert separated(winner, partner, residual) is expected
+
+
+def test_diagnose_passes_its_power_and_absorption_levels_on():
+    """power = 0.5 gives the MDB of Baarda's lambda0 at 50 %; absorbed = 0.99 absorbs every
+    candidate (none keeps 99 % of its norm beside the line), so nothing can be named."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + np.random.default_rng(1).standard_normal(X.size)
+    d = diagnose(toy_problem(y), power=0.5)
+    t = next(t for t in d.steps[0].tests if t.name == "cubic")
+    family = sum(s.status in ("testable", "undetectable") for s in d.steps[0].tests)
+    assert t.lambda0 == pytest.approx(max(noncentrality(0.01, X.size - 2, 0.5),
+                                          noncentrality(0.01 / family, 1, 0.5)), rel=1e-12)
+    assert [s.name for s in d.steps[0].tests] == list(COLUMNS) and d.steps[0].snoop == []
+    everything = diagnose(toy_problem(y), absorbed=0.99)
+    assert everything.named == [] and everything.unexplained
+    assert sorted(everything.absorbed) == sorted(COLUMNS)
