@@ -386,3 +386,46 @@ def test_diagnose_passes_its_power_and_absorption_levels_on():
     everything = diagnose(toy_problem(y), absorbed=0.99)
     assert everything.named == [] and everything.unexplained
     assert sorted(everything.absorbed) == sorted(COLUMNS)
+
+
+def test_every_status_and_its_reason():
+    """Line + quadratic fitted; candidates: the quadratic (in the model), a zero column (no
+    effect), the slope's column (absorbed by b), a tiny bounded one (undetectable), one the
+    data lack (unavailable), and a pair (x^3 + x, x^3 - x), neither absorbed alone, whose
+    first is absorbed by the model and the second together (x^3 + x = (x^3 - x) + 2 x)."""
+    columns = {"quadratic": X**2, "zero": 0 * X, "duplicate": 2 * X, "tiny": X**3,
+               "gone": X**4}
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    bound = {"tiny": 1e-4}
+    cands = (*(Effect(n, (f"c_{n}",), ((-bound.get(n, 10.0), bound.get(n, 10.0)),), (1e-3,))
+               for n in columns),
+             Effect("pair", ("p1", "p2"), ((-10.0, 10.0),) * 2, (1e-3,) * 2))
+    y = 0.3 + 0.5 * X + 2.0 * X**2 + np.random.default_rng(3).standard_normal(X.size)
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        pred = p("a") + p("b") * X + sum(p(f"c_{n}") * c for n, c in columns.items())
+        return y - pred - p("p1") * (X**3 + X) - p("p2") * (X**3 - X)
+
+    problem = Problem("toy", base, cands, residuals, {"a": 0.0, "b": 0.0},
+                      unavailable={"gone": "no time column"})
+    tests = {t.name: t for t in analyse_candidates(problem, fit_model(problem, ("quadratic",)))}
+    assert {n: (t.name, t.status, t.reason) for n, t in tests.items()
+            if n not in ("tiny", "pair")} == {
+        "quadratic": ("quadratic", "in_model", "already in the model"),
+        "zero": ("zero", "no_effect", "its parameters do not change these data"),
+        "duplicate": ("duplicate", "absorbed", "absorbed by b"),
+        "gone": ("gone", "unavailable", "no time column")}
+    assert tests["zero"].retained == {"c_zero": 0.0}
+    assert tests["tiny"].status == "undetectable"
+    assert tests["tiny"].reason.startswith("noncentrality at most ")
+    assert tests["tiny"].reason.endswith(f"{tests['tiny'].lambda0:.3g} needed")
+    pair = tests["pair"]
+    assert pair.status == "testable" and pair.active == ("p2",) and pair.reason == ""
+    assert pair.absorbed_by == {"p1": ["b"]}  # weight 2 |x| against |x^3 - x| < 0.3 of it
+    Q = np.linalg.qr(np.column_stack([np.ones_like(X), X, X**2]))[0]
+    for name, col in (("p1", X**3 + X), ("p2", X**3 - X)):
+        kept = np.linalg.norm(col - Q @ (Q.T @ col)) / np.linalg.norm(col)
+        assert pair.retained[name] == pytest.approx(kept, rel=1e-6) and kept > 0.05
+    assert list(tests) == [c.name for c in cands]
