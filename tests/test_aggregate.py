@@ -447,8 +447,12 @@ def test_fused_kernel_path_equals_the_per_trial_path_and_survives_pickling():
     signed = {"a": False, "b": True}
     expected = direct.summary(signed, 0.95)
     pd.testing.assert_frame_equal(fused.summary(signed, 0.95), expected)
+    assert fused.hist_matrix.dtype == np.int64  # integer counts add exactly
+    assert [c for c in expected.columns if c.startswith("invalid")] == ["invalid",
+                                                                        "invalid_fraction"]
     copy = pickle.loads(pickle.dumps(fused))
     assert copy.hist_matrix is None
+    assert all(m.hist.dtype == np.int64 for m in copy.metrics.values())
     pd.testing.assert_frame_equal(copy.summary(signed, 0.95), expected)
     for key in keys:
         np.testing.assert_array_equal(copy.metrics[key].hist, direct.metrics[key].hist)
@@ -468,8 +472,10 @@ def test_point_stats_merged_from_parts_equal_one_accumulator():
     assert (first.trials, first.blocks) == (whole.trials, whole.blocks)
     pd.testing.assert_frame_equal(first.summary({"m": True}, 0.9),
                                   whole.summary({"m": True}, 0.9))
-    done = first.finalize({"m": True}, 0.9)
-    pd.testing.assert_frame_equal(done.summary, whole.summary({"m": True}, 0.9))
+    spec = agg.SpecCheck("m", None, "p95", 1.0)
+    done = first.finalize({"m": True}, 0.9, spec, sampled=False)
+    pd.testing.assert_frame_equal(done.summary, whole.summary({"m": True}, 0.9, spec, False))
+    assert "verdict" in done.summary and (done.summary["sampling"] == "enumerated").all()
     assert set(done.histograms) == {("v", "m"), ("w", "m")}
 
 
