@@ -429,3 +429,25 @@ def test_every_status_and_its_reason():
         kept = np.linalg.norm(col - Q @ (Q.T @ col)) / np.linalg.norm(col)
         assert pair.retained[name] == pytest.approx(kept, rel=1e-6) and kept > 0.05
     assert list(tests) == [c.name for c in cands]
+
+
+def test_steps_record_what_each_one_tested_and_chose():
+    """The toy with each point an observation of its own and one point 8 sigma off: step 0
+    tests the line and flags the point (no group), step 1 tests the line plus the quadratic
+    the data carry, the last step finds nothing more; each step keeps every candidate's test
+    and every observation's."""
+    rng = np.random.default_rng(5)
+    y = 0.3 + 0.5 * X + 6.0 * X**2 + rng.standard_normal(X.size)
+    y[7] += 8.0
+    problem = dataclasses.replace(toy_problem(y), observations=tuple(
+        (f"P{i}", i, (i,)) for i in range(X.size)))
+    d = diagnose(problem)
+    assert [s.winner for s in d.steps] == ["quadratic", "outlier:P7", None]
+    assert [s.group for s in d.steps] == [("quadratic",), (), ()]
+    assert d.steps[0].fit is d.before and d.steps[-1].fit is d.after
+    assert d.steps[1].fit.effects == ("line", "quadratic")
+    assert d.after.effects == ("line", "quadratic", "outlier:P7")
+    for s in d.steps:
+        assert [t.name for t in s.tests] == list(COLUMNS)
+        assert [t.name for t in s.snoop] == [f"outlier:P{i}" for i in range(X.size)]
+    assert d.named == ["quadratic"] and [t.name for t in d.outliers] == ["outlier:P7"]
