@@ -193,13 +193,16 @@ def test_tasks_cover_every_block_once_in_order(small_study):
     assert tasks == [(1, range(0, 2)), (1, range(2, 3)), (0, range(0, 2)), (0, range(2, 3))]
 
 
-@pytest.mark.parametrize(("options", "blocks"), [
-    (RunOptions(chunk_size=1500), 3),
-    (RunOptions(n_jobs=1), 2),   # 6 blocks / (4 tasks per worker): ceil(1.5)
-    (RunOptions(n_jobs=4), 1),   # never below one block
+@pytest.mark.parametrize(("options", "trials", "blocks"), [
+    (RunOptions(chunk_size=1500), 1100, 3),
+    (RunOptions(n_jobs=1), 1100, 2),  # 6 blocks / (4 tasks per worker): ceil(1.5)
+    (RunOptions(), 1100, 2),          # no worker count: one
+    (RunOptions(n_jobs=1), 5000, 5),  # 20 blocks / 4
+    (RunOptions(n_jobs=4), 1100, 1),  # never below one block
 ])
-def test_blocks_per_task(small_study, options, blocks):
-    assert runner._chunk_blocks(_tiny(small_study), [0, 1], options) == blocks
+def test_blocks_per_task(small_study, options, trials, blocks):
+    got = runner._chunk_blocks(_tiny(small_study, trials), [0, 1], options)
+    assert got == blocks and isinstance(got, int)
 
 
 def test_blocks_per_task_are_capped(small_study):
@@ -229,6 +232,9 @@ def test_options_default_and_capped_workers(small_study, caplog):
     assert cores == len(os.sched_getaffinity(0))
     assert runner.checked_options(small_study, RunOptions()).n_jobs == cores
     assert runner.checked_options(small_study, RunOptions(n_jobs=1)).n_jobs == 1
+    with caplog.at_level("WARNING", logger="montecarlo"):
+        assert runner.checked_options(small_study, RunOptions(n_jobs=cores)).n_jobs == cores
+    assert "--n-jobs" not in caplog.text  # as many workers as cores: nothing to say
     assert runner.checked_options(small_study, RunOptions(chunk_size=1000)).chunk_size == 1000
     dask = RunOptions(backend="dask", scheduler="tcp://10.0.0.1:8786", n_jobs=cores + 5)
     assert runner.checked_options(small_study, dask) == dask  # a cluster's workers: not capped
@@ -236,6 +242,14 @@ def test_options_default_and_capped_workers(small_study, caplog):
         capped = runner.checked_options(small_study, RunOptions(n_jobs=cores + 5))
     assert capped.n_jobs == cores
     assert f"--n-jobs {cores + 5}: this machine has {cores} cores; using {cores}" in caplog.text
+
+
+def test_per_trial_values_always_take_the_reference_path(tmp_path):
+    """A study large enough for the compiled kernel still runs the reference path when it
+    keeps per-trial values (the kernel keeps none)."""
+    p = tmp_path / "pt.toml"
+    p.write_text(textwrap.dedent(SMALL).replace("[study]", "[study]\nper_trial = true"))
+    assert runner.uses_reference(load_study(p, trials=10**6), RunOptions())
 
 
 def test_estimated_seconds_is_cost_per_trial_times_trials(small_study):
