@@ -343,3 +343,30 @@ def test_sweep_values_mixing_numbers_and_text_become_text(small_study):
                                       study.points[1]))
     assert dc_replace(result, study=mixed)._sweep_value("geometry.L_m", 200.0) == "200.0"
     assert result._sweep_value("geometry.L_m", 200.0) == 200.0
+
+
+@pytest.mark.parametrize(("factor", "verdict"), [(2.0, "meets"), (0.5, "fails")])
+def test_a_spec_is_judged_in_its_display_unit(tmp_path, factor, verdict):
+    """The [spec] limit is in the metric's display unit: twice the largest p95 interval end of
+    a run without the spec meets, half the smallest fails. Only the spec's rows get a verdict,
+    and its value is the row's p95 when every trial has a value."""
+    p = tmp_path / "spec.toml"
+    text = textwrap.dedent(SMALL).replace("trials = 3000", "trials = 500")
+    p.write_text(text)
+    options = RunOptions(n_jobs=1, progress=False)
+    plain = run_study(load_study(p), options).to_frame()
+    rows = plain[(plain["metric"] == "rotation_angle") & (plain["variant"] == "raw")]
+    limit = factor * (rows["p95_hi"].max() if factor > 1 else rows["p95_lo"].min())
+    p.write_text(text + textwrap.dedent(f"""
+        [spec]
+        metric = "rotation_angle"
+        variant = "raw"
+        statistic = "p95"
+        limit = {float(limit)!r}
+        """))
+    frame = run_study(load_study(p), options).to_frame()
+    judged = frame[(frame["metric"] == "rotation_angle") & (frame["variant"] == "raw")]
+    assert len(judged) == 2 and (judged["verdict"] == verdict).all()
+    assert frame.drop(judged.index)["verdict"].isna().all()
+    valid = judged[judged["invalid"] == 0]
+    assert (valid["spec_value"] == valid["p95"]).all()
