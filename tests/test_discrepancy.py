@@ -6,6 +6,7 @@ its distribution under the base model is chi2(q) (checked by Monte Carlo), and i
 noncentrality at the MDB is lambda0 (Baarda).
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -23,6 +24,7 @@ from montecarlo.discrepancy.engine import (
     log_chi2_sf,
     log_chi2_sf_asymptotic,
     noncentrality,
+    separated,
 )
 from montecarlo.discrepancy.fit import fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem
@@ -286,3 +288,166 @@ def test_holm_adjusted_p_values_reach_the_report_json():
     named = report["named_effects"][0]
     assert named["p_value"] == next(c["p_adjusted"] for c in family if c["name"] == "cubic")
     assert named["p_value"] != next(c["p_value"] for c in family if c["name"] == "cubic")
+
+
+def bend_problem(y: np.ndarray) -> Problem:
+    """The line plus one two-parameter candidate: a tilt 3 x (the slope's column: absorbed)
+    and a bow x^2 (bounded at 100, the tilt at 1)."""
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    bend = Effect("bend", ("c_tilt", "c_bow"), ((-1.0, 1.0), (-100.0, 100.0)), (1e-3, 1e-3))
+
+    def residuals(v):
+        a, b, t, q = (np.asarray(v.get(k, 0.0), float) for k in ("a", "b", "c_tilt", "c_bow"))
+        return y - (a + b * X + t * 3.0 * X + q * X**2)
+
+    return Problem("toy", base, (bend,), residuals, {"a": 0.0, "b": 0.0})
+
+
+def test_a_candidate_with_one_absorbed_parameter_enters_with_the_other_only():
+    """The tilt cannot be estimated beside the slope: the adapted model is the line plus the
+    bow, whose fit equals numpy's lstsq on (1, x, x^2)."""
+    rng = np.random.default_rng(4)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + rng.standard_normal(X.size)
+    d = diagnose(bend_problem(y))
+    test = next(t for t in d.steps[0].tests if t.name == "bend")
+    assert test.active == ("c_bow",) and test.absorbed_by == {"c_tilt": ["b"]}
+    assert d.named == ["bend"] and not d.unexplained
+    assert d.after.names == ("a", "b", "c_bow")
+    chi2, coef = chi2_of([np.ones_like(X), X, X**2], y)
+    assert d.after.chi2 == pytest.approx(chi2, rel=1e-9)
+    np.testing.assert_allclose(d.after.values, coef, rtol=1e-7)
+    result = d.effect_result("bend")
+    assert result["parameters"] == {"c_bow": d.after.params["c_bow"]}
+    assert result["stderr"] == {"c_bow": d.after.stderr["c_bow"]}
+
+
+def test_effect_result_of_a_named_effect():
+    rng = np.random.default_rng(2)
+    y = 0.3 + 0.5 * X + 1.6 * X**3 + 0.3 * rng.standard_normal(X.size)
+    d = diagnose(toy_problem(y, sigma=0.3))
+    test = next(t for t in d.steps[0].tests if t.name == "cubic")
+    assert d.effect_result("cubic") == {
+        "name": "cubic", "parameters": {"c_cubic": d.after.params["c_cubic"]},
+        "stderr": {"c_cubic": d.after.stderr["c_cubic"]}, "p_value": test.p_adjusted,
+        "p_value_unadjusted": test.p_value, "statistic": test.statistic, "dof": 1}
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 4, 5, 6, 8, 10])
+def test_log_chi2_sf_tail_series_is_within_its_first_omitted_term(dof):
+    """Three terms of the series of Gamma(a, y): exact for a = 1, 2, 3 (dof 2, 4, 6), otherwise
+    off by about the first omitted term (a-1)(a-2)(a-3)/y^3 (scipy as the reference)."""
+    a = dof / 2.0
+    for x in (60.0, 200.0, 1000.0):
+        y = x / 2.0
+        omitted = abs((a - 1.0) * (a - 2.0) * (a - 3.0)) / y**3
+        got, exact = log_chi2_sf_asymptotic(x, dof), stats.chi2.logsf(x, dof)
+        assert abs(got - exact) <= 2.0 * omitted + 1e-12 * abs(exact)
+
+
+def test_canonical_correlation_limits():
+    problem = toy_problem(0.3 + 0.5 * X)
+    tests = {t.name: t for t in analyse_candidates(problem, fit_model(problem, ()))}
+    quadratic = tests["quadratic"]
+    assert canonical_correlation(quadratic, quadratic) == 1.0  # never above one
+    assert tests["duplicate"].basis is None  # absorbed: no column space
+    assert canonical_correlation(quadratic, tests["duplicate"]) == 0.0
+    assert canonical_correlation(tests["duplicate"], quadratic) == 0.0
+    empty = dataclasses.replace(quadratic, basis=np.zeros((X.size, 0)))
+    assert canonical_correlation(quadratic, empty) == canonical_correlation(empty, quadratic) \
+        == 0.0
+
+
+def test_a_partner_that_absorbs_the_winner_is_never_separated_from_it():
+    """Winner column 10 e1; the partner's column at 3 % off it, so the winner keeps 3 % of its
+    norm beside the partner (below ``absorbed``): not separated however large the residual
+    along the winner's own direction; at 30 % off the same residual separates them."""
+    rng = np.random.default_rng(0)
+    e = np.linalg.qr(rng.standard_normal((X.size, 2)))[0]
+    winner = dataclasses.replace(analyse_candidates(toy_problem(0 * X), fit_model(
+        toy_problem(0 * X), ()))[0], projected=10.0 * e[:, :1], basis=e[:, :1])
+    for off, expected in ((0.03, False), (0.3, True)):
+        u = (math.sqrt(1 - off**2) * e[:, 0] + off * e[:, 1])[:, None]
+        partner = dataclasses.replace(winner, basis=u, projected=u)
+        residual = 100.0 * (e[:, 0] - u[:, 0] * u[:, 0] @ e[:, 0])
+        residual /= np.linalg.norm(residual) / 100.0
+        assert separated(winner, partner, residual) is expected
+
+
+def test_diagnose_passes_its_power_and_absorption_levels_on():
+    """power = 0.5 gives the MDB of Baarda's lambda0 at 50 %; absorbed = 0.99 absorbs every
+    candidate (none keeps 99 % of its norm beside the line), so nothing can be named."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + np.random.default_rng(1).standard_normal(X.size)
+    d = diagnose(toy_problem(y), power=0.5)
+    t = next(t for t in d.steps[0].tests if t.name == "cubic")
+    family = sum(s.status in ("testable", "undetectable") for s in d.steps[0].tests)
+    assert t.lambda0 == pytest.approx(max(noncentrality(0.01, X.size - 2, 0.5),
+                                          noncentrality(0.01 / family, 1, 0.5)), rel=1e-12)
+    assert [s.name for s in d.steps[0].tests] == list(COLUMNS) and d.steps[0].snoop == []
+    everything = diagnose(toy_problem(y), absorbed=0.99)
+    assert everything.named == [] and everything.unexplained
+    assert sorted(everything.absorbed) == sorted(COLUMNS)
+
+
+def test_every_status_and_its_reason():
+    """Line + quadratic fitted; candidates: the quadratic (in the model), a zero column (no
+    effect), the slope's column (absorbed by b), a tiny bounded one (undetectable), one the
+    data lack (unavailable), and a pair (x^3 + x, x^3 - x), neither absorbed alone, whose
+    first is absorbed by the model and the second together (x^3 + x = (x^3 - x) + 2 x)."""
+    columns = {"quadratic": X**2, "zero": 0 * X, "duplicate": 2 * X, "tiny": X**3,
+               "gone": X**4}
+    base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+    bound = {"tiny": 1e-4}
+    cands = (*(Effect(n, (f"c_{n}",), ((-bound.get(n, 10.0), bound.get(n, 10.0)),), (1e-3,))
+               for n in columns),
+             Effect("pair", ("p1", "p2"), ((-10.0, 10.0),) * 2, (1e-3,) * 2))
+    y = 0.3 + 0.5 * X + 2.0 * X**2 + np.random.default_rng(3).standard_normal(X.size)
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        pred = p("a") + p("b") * X + sum(p(f"c_{n}") * c for n, c in columns.items())
+        return y - pred - p("p1") * (X**3 + X) - p("p2") * (X**3 - X)
+
+    problem = Problem("toy", base, cands, residuals, {"a": 0.0, "b": 0.0},
+                      unavailable={"gone": "no time column"})
+    tests = {t.name: t for t in analyse_candidates(problem, fit_model(problem, ("quadratic",)))}
+    assert {n: (t.name, t.status, t.reason) for n, t in tests.items()
+            if n not in ("tiny", "pair")} == {
+        "quadratic": ("quadratic", "in_model", "already in the model"),
+        "zero": ("zero", "no_effect", "its parameters do not change these data"),
+        "duplicate": ("duplicate", "absorbed", "absorbed by b"),
+        "gone": ("gone", "unavailable", "no time column")}
+    assert tests["zero"].retained == {"c_zero": 0.0}
+    assert tests["tiny"].status == "undetectable"
+    assert tests["tiny"].reason.startswith("noncentrality at most ")
+    assert tests["tiny"].reason.endswith(f"{tests['tiny'].lambda0:.3g} needed")
+    pair = tests["pair"]
+    assert pair.status == "testable" and pair.active == ("p2",) and pair.reason == ""
+    assert pair.absorbed_by == {"p1": ["b"]}  # weight 2 |x| against |x^3 - x| < 0.3 of it
+    Q = np.linalg.qr(np.column_stack([np.ones_like(X), X, X**2]))[0]
+    for name, col in (("p1", X**3 + X), ("p2", X**3 - X)):
+        kept = np.linalg.norm(col - Q @ (Q.T @ col)) / np.linalg.norm(col)
+        assert pair.retained[name] == pytest.approx(kept, rel=1e-6) and kept > 0.05
+    assert list(tests) == [c.name for c in cands]
+
+
+def test_steps_record_what_each_one_tested_and_chose():
+    """The toy with each point an observation of its own and one point 8 sigma off: step 0
+    tests the line and flags the point (no group), step 1 tests the line plus the quadratic
+    the data carry, the last step finds nothing more; each step keeps every candidate's test
+    and every observation's."""
+    rng = np.random.default_rng(5)
+    y = 0.3 + 0.5 * X + 6.0 * X**2 + rng.standard_normal(X.size)
+    y[7] += 8.0
+    problem = dataclasses.replace(toy_problem(y), observations=tuple(
+        (f"P{i}", i, (i,)) for i in range(X.size)))
+    d = diagnose(problem)
+    assert [s.winner for s in d.steps] == ["quadratic", "outlier:P7", None]
+    assert [s.group for s in d.steps] == [("quadratic",), (), ()]
+    assert d.steps[0].fit is d.before and d.steps[-1].fit is d.after
+    assert d.steps[1].fit.effects == ("line", "quadratic")
+    assert d.after.effects == ("line", "quadratic", "outlier:P7")
+    for s in d.steps:
+        assert [t.name for t in s.tests] == list(COLUMNS)
+        assert [t.name for t in s.snoop] == [f"outlier:P{i}" for i in range(X.size)]
+    assert d.named == ["quadratic"] and [t.name for t in d.outliers] == ["outlier:P7"]

@@ -175,3 +175,198 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
                                   pd.read_parquet(a / "summary.parquet"), check_exact=True)
     assert not ck_root.exists()  # cleaned up after success
     assert not list(b.parent.glob(".out.*"))  # and the stale staging directory removed
+
+
+# --- in-process runs (n_jobs=1): task plan, options, callbacks, interruption, trial tables -------
+
+
+def _tiny(small_study, trials=1100):
+    """The small study with ``trials`` per point: blocks of 500, the last one short."""
+    return load_study(small_study.path, trials=trials)
+
+
+def test_tasks_cover_every_block_once_in_order(small_study):
+    study = _tiny(small_study)
+    assert [runner._n_blocks(study, p) for p in (0, 1)] == [3, 3]
+    assert [runner._block_trials(study, 0, b) for b in range(3)] == [500, 500, 100]
+    tasks = list(runner._tasks(study, [1, 0], 2))
+    assert tasks == [(1, range(0, 2)), (1, range(2, 3)), (0, range(0, 2)), (0, range(2, 3))]
+
+
+@pytest.mark.parametrize(("options", "trials", "blocks"), [
+    (RunOptions(chunk_size=1500), 1100, 3),
+    (RunOptions(n_jobs=1), 1100, 2),  # 6 blocks / (4 tasks per worker): ceil(1.5)
+    (RunOptions(), 1100, 2),          # no worker count: one
+    (RunOptions(n_jobs=1), 5000, 5),  # 20 blocks / 4
+    (RunOptions(n_jobs=4), 1100, 1),  # never below one block
+])
+def test_blocks_per_task(small_study, options, trials, blocks):
+    got = runner._chunk_blocks(_tiny(small_study, trials), [0, 1], options)
+    assert got == blocks and isinstance(got, int)
+
+
+def test_blocks_per_task_are_capped(small_study):
+    study = _tiny(small_study, trials=500 * 1000)  # 2000 blocks on one worker: 500 > 32
+    assert runner._chunk_blocks(study, [0, 1], RunOptions(n_jobs=1)) == runner.MAX_CHUNK_BLOCKS
+
+
+@pytest.mark.parametrize(("options", "needle"), [
+    (RunOptions(n_jobs=0), "--n-jobs: must be at least 1 (got 0)"),
+    (RunOptions(scheduler="tcp://h:1"), "--scheduler: only meaningful with --backend dask"),
+    (RunOptions(backend="dask", scheduler="http://h:1"), "is not a dask scheduler address"),
+    (RunOptions(chunk_size=700), "--chunk-size: 700 is not a positive multiple of the study's "
+                                 "block size 500"),
+    (RunOptions(chunk_size=0), "--chunk-size: 0"),
+    (RunOptions(chunk_size=-500), "--chunk-size: -500"),
+])
+def test_options_refused_before_any_work(small_study, options, needle):
+    from montecarlo.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        runner.checked_options(small_study, options)
+    assert needle in str(err.value)
+
+
+def test_options_default_and_capped_workers(small_study, caplog):
+    cores = runner.available_cores()
+    assert cores == len(os.sched_getaffinity(0))
+    assert runner.checked_options(small_study, RunOptions()).n_jobs == cores
+    assert runner.checked_options(small_study, RunOptions(n_jobs=1)).n_jobs == 1
+    with caplog.at_level("WARNING", logger="montecarlo"):
+        assert runner.checked_options(small_study, RunOptions(n_jobs=cores)).n_jobs == cores
+    assert "--n-jobs" not in caplog.text  # as many workers as cores: nothing to say
+    assert runner.checked_options(small_study, RunOptions(chunk_size=1000)).chunk_size == 1000
+    dask = RunOptions(backend="dask", scheduler="tcp://10.0.0.1:8786", n_jobs=cores + 5)
+    assert runner.checked_options(small_study, dask) == dask  # a cluster's workers: not capped
+    with caplog.at_level("WARNING", logger="montecarlo"):
+        capped = runner.checked_options(small_study, RunOptions(n_jobs=cores + 5))
+    assert capped.n_jobs == cores
+    assert f"--n-jobs {cores + 5}: this machine has {cores} cores; using {cores}" in caplog.text
+
+
+def test_per_trial_values_always_take_the_reference_path(tmp_path):
+    """A study large enough for the compiled kernel still runs the reference path when it
+    keeps per-trial values (the kernel keeps none)."""
+    p = tmp_path / "pt.toml"
+    p.write_text(textwrap.dedent(SMALL).replace("[study]", "[study]\nper_trial = true"))
+    assert runner.uses_reference(load_study(p, trials=10**6), RunOptions())
+
+
+def test_estimated_seconds_is_cost_per_trial_times_trials(small_study):
+    study = _tiny(small_study, trials=1000)
+    per_trial = study.system.seconds_per_trial
+    assert runner.estimated_seconds(study, [0, 1], False) == pytest.approx(2000 * per_trial)
+    assert runner.estimated_seconds(study, [1], True) == pytest.approx(20 * 1000 * per_trial)
+
+
+@pytest.mark.parametrize(("seconds", "text"), [
+    (0.4, "under a second"), (1.0, "1 s"), (45.2, "45 s"), (119.0, "119 s"), (120.0, "2 min"),
+    (720.0, "12 min"), (3.5 * 3600, "3.5 h"), (2.1 * 86400, "2.1 days"),
+    (4000 * 365.25 * 86400, "4e+03 years"), (2e4 * 365.25 * 86400, "2.0e+04 years"),
+])
+def test_durations_for_people(seconds, text):
+    assert runner.duration_text(seconds) == text
+    assert runner.about(seconds) == (text if seconds < 1 else f"about {text}")
+
+
+def test_in_process_run_plan_callbacks_and_trial_table(tmp_path, caplog):
+    """Per-trial values in trial order, the plan announced, one callback per grid point."""
+    p = tmp_path / "pt.toml"
+    p.write_text(textwrap.dedent(SMALL).replace("trials = 3000", "trials = 1100")
+                 .replace("[study]", "[study]\nper_trial = true"))
+    study = load_study(p)
+    seen: list[int] = []
+    with caplog.at_level("INFO", logger="montecarlo"):
+        result = run_study(study, RunOptions(n_jobs=1, progress=False), on_point=seen.append)
+    assert sorted(seen) == [0, 1] and result.kernel == "reference" and result.resumed == {}
+    assert "small: 2 of 2 grid points to run, 2,200 trials (under a second on 1 core)" \
+        in caplog.text
+    assert sorted(result.trials) == [0, 1]
+    for point, frame in result.trials.items():
+        assert frame["trial"].tolist() == list(range(1100))
+        assert (frame["point"] == point).all()
+    summary = result.to_frame()
+    assert list(summary.columns[:5]) == ["point", "geometry.L_m", "variant", "metric", "unit"]
+    for (point, variant, metric), row in summary.set_index(["point", "variant", "metric"]) \
+            .iterrows():
+        v = result.trials[point][f"{variant}/{metric}"].to_numpy()
+        scale = study.metric(metric).scale
+        assert row["count"] == np.isfinite(v).sum() and row["trials"] == 1100
+        assert row["mean"] == pytest.approx(np.nanmean(v) * scale, rel=1e-12)
+        assert row["unit"] == study.metric(metric).unit
+
+
+def test_reused_points_are_not_run_again(small_study):
+    study = _tiny(small_study, trials=500)
+    options = RunOptions(n_jobs=1, progress=False)
+    first = run_study(study, options)
+    seen: list[int] = []
+    again = run_study(study, options, on_point=seen.append, reuse={0: first.points[0]})
+    assert seen == [1] and again.points[0] is first.points[0]
+    pd.testing.assert_frame_equal(again.to_frame(), first.to_frame(), check_exact=True)
+
+
+def test_an_interrupted_run_keeps_finished_points_and_says_how_to_resume(small_study, tmp_path,
+                                                                        caplog):
+    from montecarlo.errors import RunInterrupted
+
+    study = _tiny(small_study, trials=500)
+    options = RunOptions(n_jobs=1, progress=False, checkpoint_dir=tmp_path / "ck")
+
+    def stop(point):
+        raise KeyboardInterrupt
+
+    with pytest.raises(RunInterrupted) as err:
+        run_study(study, options, on_point=stop)
+    assert err.value.code == 130
+    assert str(err.value).startswith(
+        "small: interrupted; 1 of 2 grid points finished (1 in this run); rerun the same "
+        f"command to resume from {tmp_path / 'ck'}")
+    with caplog.at_level("WARNING", logger="montecarlo"):
+        resumed = run_study(study, options)
+    assert resumed.resumed["points"] == [0] and resumed.resumed["key"]
+    assert "small: resuming, 1 of 2 grid points already computed" in caplog.text
+    whole = run_study(study, RunOptions(n_jobs=1, progress=False))
+    pd.testing.assert_frame_equal(resumed.to_frame(), whole.to_frame(), check_exact=True)
+    with pytest.raises(RunInterrupted) as err:  # without checkpoints: nothing to resume from
+        run_study(study, RunOptions(n_jobs=1, progress=False), on_point=stop)
+    assert str(err.value).endswith("1 of 2 grid points finished (1 in this run)")
+
+
+def test_sweep_values_mixing_numbers_and_text_become_text(small_study):
+    from dataclasses import replace as dc_replace
+
+    study = _tiny(small_study, trials=500)
+    result = run_study(study, RunOptions(n_jobs=1, progress=False))
+    assert result.to_frame()["geometry.L_m"].tolist()[0] == 50.0
+    mixed = dc_replace(study, points=(dc_replace(study.points[0], values={"geometry.L_m": "a"}),
+                                      study.points[1]))
+    assert dc_replace(result, study=mixed)._sweep_value("geometry.L_m", 200.0) == "200.0"
+    assert result._sweep_value("geometry.L_m", 200.0) == 200.0
+
+
+@pytest.mark.parametrize(("factor", "verdict"), [(2.0, "meets"), (0.5, "fails")])
+def test_a_spec_is_judged_in_its_display_unit(tmp_path, factor, verdict):
+    """The [spec] limit is in the metric's display unit: twice the largest p95 interval end of
+    a run without the spec meets, half the smallest fails. Only the spec's rows get a verdict,
+    and its value is the row's p95 when every trial has a value."""
+    p = tmp_path / "spec.toml"
+    text = textwrap.dedent(SMALL).replace("trials = 3000", "trials = 500")
+    p.write_text(text)
+    options = RunOptions(n_jobs=1, progress=False)
+    plain = run_study(load_study(p), options).to_frame()
+    rows = plain[(plain["metric"] == "rotation_angle") & (plain["variant"] == "raw")]
+    limit = factor * (rows["p95_hi"].max() if factor > 1 else rows["p95_lo"].min())
+    p.write_text(text + textwrap.dedent(f"""
+        [spec]
+        metric = "rotation_angle"
+        variant = "raw"
+        statistic = "p95"
+        limit = {float(limit)!r}
+        """))
+    frame = run_study(load_study(p), options).to_frame()
+    judged = frame[(frame["metric"] == "rotation_angle") & (frame["variant"] == "raw")]
+    assert len(judged) == 2 and (judged["verdict"] == verdict).all()
+    assert frame.drop(judged.index)["verdict"].isna().all()
+    valid = judged[judged["invalid"] == 0]
+    assert (valid["spec_value"] == valid["p95"]).all()
