@@ -518,9 +518,6 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
                 outliers = []
                 named.append(name)
             continue
-        if fit.p_value >= alpha:
-            steps.append(Step(fit, tests, None, (), snoop))
-            break
         eligible = [t for t in (*tests, *snoop) if t.status == "testable"
                     and t.p_adjusted < alpha and t.name not in dropped]
         if not eligible:
