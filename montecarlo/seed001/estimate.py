@@ -37,6 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed001 import kernels
 from montecarlo.seed001.kinematics import camera_matrix
 from montecarlo.seed001.linear_model import drift_matrix, image_roll_rate, plane_rotation
 from montecarlo.seed001.simulate import Compensation, Record, Setup
@@ -53,6 +54,14 @@ PRIOR_SIGMA = {"angle": np.radians(5.0), "bias": np.radians(50.0) / 3600.0, "off
 """Prior standard deviations: installation angles [rad], gyro biases [rad/s], initial image
 offset of the target [px]. Wide enough not to pull observable parameters; they keep the
 unobservable ones (e.g. ``delta_py`` when the drift is small) finite."""
+
+
+def gauss_points(t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """The two Gauss points ``t_mid -/+ h sqrt(3)/6`` of each step of ``t`` [s]."""
+    t = np.asarray(t, float)
+    h = np.diff(t)
+    mid, half = t[:-1] + 0.5 * h, h * np.sqrt(3.0) / 6.0
+    return mid - half, mid + half
 
 
 def carrier_attitude(t: ArrayLike, omega: ArrayLike) -> FloatArray:
@@ -76,8 +85,7 @@ def carrier_attitude(t: ArrayLike, omega: ArrayLike) -> FloatArray:
     omega = np.asarray(omega, float)
     spline = CubicSpline(t, omega, axis=omega.ndim - 2)
     h = np.diff(t)
-    mid, half = t[:-1] + 0.5 * h, h * np.sqrt(3.0) / 6.0
-    w1, w2 = spline(mid - half), spline(mid + half)
+    w1, w2 = (spline(g) for g in gauss_points(t))
     rotvec = (0.5 * h[:, None]) * (w1 + w2) + (np.sqrt(3.0) / 12.0 * h[:, None] ** 2) * np.cross(
         w1, w2)
     step = Rotation.from_rotvec(rotvec.reshape(-1, 3)).as_matrix().reshape(*rotvec.shape, 3)
@@ -164,6 +172,74 @@ def los_jacobian(
         moved[..., j] += h
         columns.append((predict_los(t, gyro, eta, eps, moved, camera) - predicted) / h)
     return np.stack(columns, axis=-1)
+
+
+class LosModel:
+    """:func:`predict_los` and :func:`los_jacobian` of one batch of runs, compiled.
+
+    The gyro output is splined once (the spline is linear, so the rate of any parameters is
+    the same affine map of the splined gyro output, applied by :func:`kernels.magnus_attitude`);
+    in the Jacobian, the attitude moves only with ``delta_gx, delta_gy`` and the biases, the
+    camera angles only with ``delta_px, delta_py, delta_z``, and each is recomputed only then.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,) [s]
+    gyro : array_like, shape (B, N, 3) [rad/s]
+    eta, eps : array_like, shape (B, N) [rad]
+    camera : Camera
+    """
+
+    ATTITUDE = (1, 2, 5, 6, 7)
+    """Parameters that move the carrier attitude rebuilt from the gyro output."""
+
+    def __init__(self, t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike,
+                 camera: Camera) -> None:
+        t = np.asarray(t, float)
+        spline = CubicSpline(t, np.asarray(gyro, float), axis=1)
+        self.h = np.diff(t)
+        self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
+        self.eta, self.eps = np.asarray(eta, float), np.asarray(eps, float)
+        self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
+
+    def _attitude(self, p: FloatArray) -> FloatArray:
+        C_bg = mounting_matrix(0.0, p[:, 1], p[:, 2])  # seed 001, eq. (1) with dgz = 0
+        return kernels.magnus_attitude(self.h, self.w1, self.w2,
+                                       np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
+                                       np.ascontiguousarray(p[:, 5:8]))
+
+    def _camera(self, p: FloatArray) -> tuple[FloatArray, ...]:
+        azimuth = self.eta + p[:, 3, None]  # seed 001, eq. (2)
+        pitch = self.eps + p[:, 0, None]
+        return np.cos(azimuth), np.sin(azimuth), np.cos(pitch), np.sin(pitch)
+
+    def _pixels(self, R: FloatArray, trig: tuple[FloatArray, ...], p: FloatArray) -> FloatArray:
+        ca, sa, ce, se = trig
+        target = np.stack([-ce[:, 0] * sa[:, 0], ce[:, 0] * ca[:, 0], se[:, 0]], axis=-1)
+        return kernels.target_pixels(R, target, ca, sa, ce, se, np.cos(p[:, 4]),
+                                     np.sin(p[:, 4]), self.k_x, self.k_z)
+
+    def predict(self, params: ArrayLike) -> FloatArray:
+        """:func:`predict_los` at ``params`` (shape (B, 8)), shape (B, N, 2) [px]."""
+        p = np.asarray(params, float)
+        return self._pixels(self._attitude(p), self._camera(p), p)
+
+    def predict_and_jacobian(self, params: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """:func:`predict_los` and :func:`los_jacobian` at ``params``, shapes (B, N, 2) and
+        (B, N, 2, 8)."""
+        p = np.asarray(params, float)
+        R, trig = self._attitude(p), self._camera(p)
+        predicted = self._pixels(R, trig, p)
+        columns = []
+        for j, h in enumerate(JACOBIAN_STEP):
+            moved = p.copy()
+            moved[:, j] += h
+            if j in self.ATTITUDE:
+                pixels = self._pixels(self._attitude(moved), trig, moved)
+            else:
+                pixels = self._pixels(R, self._camera(moved), moved)
+            columns.append((pixels - predicted) / h)
+        return predicted, np.stack(columns, axis=-1)
 
 
 def recursive_least_squares(
@@ -289,6 +365,7 @@ def estimate(
     forgetting: float = 1.0,
     max_passes: int = 10,
     tol: float = 1e-2,
+    reference: bool = False,
 ) -> Estimate:
     """Estimate installation angles and gyro biases from a run (or a batch of runs).
 
@@ -312,6 +389,10 @@ def estimate(
         (:func:`los_jacobian`).
     tol : float
         Convergence: every parameter moved by less than ``tol`` standard deviations.
+    reference : bool
+        Run the literal numpy functions (:func:`predict_los`, :func:`los_jacobian`,
+        :func:`recursive_least_squares`) instead of :class:`LosModel` and
+        :func:`kernels.rls_pass` (same results to about 1e-12, many times slower).
 
     Returns
     -------
@@ -345,23 +426,58 @@ def estimate(
     params = np.zeros((*batch, n_par))
     converged = np.zeros(batch, bool)
     cov = np.broadcast_to(prior_cov[:n_par, :n_par], (*batch, n_par, n_par))
+    if reference:
+        def predict(q):
+            return predict_los(t, gyro, eta, eps, q, camera)
+
+        def predict_and_jacobian(q):
+            predicted = predict(q)
+            return predicted, los_jacobian(t, gyro, eta, eps, q, camera, predicted)
+
+        def rls(rows, obs, prior_mean):
+            return recursive_least_squares(rows, obs, prior_mean, prior_cov, image_noise**2,
+                                           forgetting=forgetting,
+                                           walk_transition=walk_transition, walk_var=walk_var)
+    else:
+        flat = [np.ascontiguousarray(np.broadcast_to(a, (*batch, *np.shape(a)[-k:])).reshape(
+            -1, *np.shape(a)[-k:])) for a, k in ((gyro, 2), (eta, 1), (eps, 1), (los_px, 2))]
+        model = LosModel(t, *flat[:3], camera)
+        walk = [np.ascontiguousarray(np.broadcast_to(a, (*batch, t.size, *tail)).reshape(
+            -1, t.size, *tail)) for a, tail in ((walk_transition, (2, 2)),
+                                                (0.0 if walk_var is None else walk_var, (2,)))]
+        cov_flat = np.ascontiguousarray(np.broadcast_to(prior_cov, (len(flat[0]),
+                                                                    *prior_cov.shape)))
+
+        def predict(q):
+            return model.predict(q.reshape(-1, n_par)).reshape(*batch, t.size, 2)
+
+        def predict_and_jacobian(q):
+            predicted, rows = model.predict_and_jacobian(q.reshape(-1, n_par))
+            return predicted.reshape(*batch, t.size, 2), rows.reshape(*batch, t.size, 2, n_par)
+
+        def rls(rows, obs, prior_mean):
+            x, P = kernels.rls_pass(
+                np.ascontiguousarray(np.broadcast_to(rows, (*batch, t.size, 2, n_par))
+                                     ).reshape(-1, t.size, 2, n_par),
+                np.ascontiguousarray(obs).reshape(-1, t.size, 2), prior_mean.reshape(-1, n_par + 2),
+                cov_flat, image_noise**2, forgetting, *walk)
+            return x.reshape(*batch, n_par + 2), P.reshape(*batch, n_par + 2, n_par + 2)
+
     passes = 0
     for passes in range(1, max_passes + 1):
-        predicted = predict_los(t, gyro, eta, eps, params, camera)
-        rows = first_rows if passes == 1 else los_jacobian(t, gyro, eta, eps, params, camera,
-                                                           predicted)
+        if passes == 1:
+            predicted, rows = predict(params), first_rows
+        else:
+            predicted, rows = predict_and_jacobian(params)
         prior_mean = np.concatenate([-params, np.zeros((*batch, 2))], axis=-1)
-        x, P = recursive_least_squares(rows, los_px - predicted, prior_mean, prior_cov,
-                                       image_noise**2, forgetting=forgetting,
-                                       walk_transition=walk_transition, walk_var=walk_var)
+        x, P = rls(rows, los_px - predicted, prior_mean)
         params = params + x[..., :n_par]
         cov = P[..., :n_par, :n_par]
         step = np.abs(x[..., :n_par]) / np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
         converged = np.all(step < tol, axis=-1)
         if np.all(converged):
             break
-    predicted = predict_los(t, gyro, eta, eps, params, camera)
-    residual = los_px - predicted
+    residual = los_px - predict(params)
     residual = residual - residual.mean(axis=-2, keepdims=True)
     rms = np.sqrt(np.mean(np.sum(residual**2, axis=-1), axis=-1))
     return Estimate(values=params, covariance=cov, passes=passes, converged=converged,
