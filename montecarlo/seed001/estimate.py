@@ -178,9 +178,9 @@ class LosModel:
     """:func:`predict_los` and :func:`los_jacobian` of one batch of runs, compiled.
 
     The gyro output is splined once (the spline is linear, so the rate of any parameters is
-    the same affine map of the splined gyro output, applied by :func:`kernels.magnus_attitude`);
-    in the Jacobian, the attitude moves only with ``delta_gx, delta_gy`` and the biases, the
-    camera angles only with ``delta_px, delta_py, delta_z``, and each is recomputed only then.
+    the same affine map of the splined gyro output, applied by
+    :func:`kernels.predicted_pixels`) and the cosines and sines of the gimbal angles are taken
+    once (the camera's follow by the sum formulas).
 
     Parameters
     ----------
@@ -190,9 +190,6 @@ class LosModel:
     camera : Camera
     """
 
-    ATTITUDE = (1, 2, 5, 6, 7)
-    """Parameters that move the carrier attitude rebuilt from the gyro output."""
-
     def __init__(self, t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike,
                  camera: Camera) -> None:
         t = np.asarray(t, float)
@@ -200,46 +197,36 @@ class LosModel:
         self.h = np.diff(t)
         self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
         self.eta, self.eps = np.asarray(eta, float), np.asarray(eps, float)
+        self.trig = [f(a) for a in (eta, eps) for f in (np.cos, np.sin)]
         self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
+        self.shape = np.shape(eta)
+        self._jacobian = np.empty((*self.shape, 2, len(PARAMETER_NAMES)))
 
-    def _attitude(self, p: FloatArray) -> FloatArray:
+    def _pixels(self, p: FloatArray, out: FloatArray, base: FloatArray | None = None,
+                step: float = 0.0) -> FloatArray:
+        """Image of the target at parameters ``p``, or its difference quotient from ``base``."""
         C_bg = mounting_matrix(0.0, p[:, 1], p[:, 2])  # seed 001, eq. (1) with dgz = 0
-        return kernels.magnus_attitude(self.h, self.w1, self.w2,
-                                       np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
-                                       np.ascontiguousarray(p[:, 5:8]))
-
-    def _camera(self, p: FloatArray) -> tuple[FloatArray, ...]:
-        azimuth = self.eta + p[:, 3, None]  # seed 001, eq. (2)
-        pitch = self.eps + p[:, 0, None]
-        return np.cos(azimuth), np.sin(azimuth), np.cos(pitch), np.sin(pitch)
-
-    def _pixels(self, R: FloatArray, trig: tuple[FloatArray, ...], p: FloatArray) -> FloatArray:
-        ca, sa, ce, se = trig
-        target = np.stack([-ce[:, 0] * sa[:, 0], ce[:, 0] * ca[:, 0], se[:, 0]], axis=-1)
-        return kernels.target_pixels(R, target, ca, sa, ce, se, np.cos(p[:, 4]),
-                                     np.sin(p[:, 4]), self.k_x, self.k_z)
+        kernels.predicted_pixels(self.h, self.w1, self.w2,
+                                 np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
+                                 np.ascontiguousarray(p[:, 5:8]), *self.trig,
+                                 np.ascontiguousarray(p[:, [3, 0, 4]]), self.k_x, self.k_z,
+                                 out if base is None else base, step, out)
+        return out
 
     def predict(self, params: ArrayLike) -> FloatArray:
         """:func:`predict_los` at ``params`` (shape (B, 8)), shape (B, N, 2) [px]."""
-        p = np.asarray(params, float)
-        return self._pixels(self._attitude(p), self._camera(p), p)
+        return self._pixels(np.asarray(params, float), np.empty((*self.shape, 2)))
 
     def predict_and_jacobian(self, params: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:func:`predict_los` and :func:`los_jacobian` at ``params``, shapes (B, N, 2) and
-        (B, N, 2, 8)."""
+        (B, N, 2, 8); the Jacobian is overwritten by the next call."""
         p = np.asarray(params, float)
-        R, trig = self._attitude(p), self._camera(p)
-        predicted = self._pixels(R, trig, p)
-        columns = []
+        predicted = self.predict(p)
         for j, h in enumerate(JACOBIAN_STEP):
             moved = p.copy()
             moved[:, j] += h
-            if j in self.ATTITUDE:
-                pixels = self._pixels(self._attitude(moved), trig, moved)
-            else:
-                pixels = self._pixels(R, self._camera(moved), moved)
-            columns.append((pixels - predicted) / h)
-        return predicted, np.stack(columns, axis=-1)
+            self._pixels(moved, self._jacobian[..., j], predicted, h)
+        return predicted, self._jacobian
 
 
 def recursive_least_squares(
@@ -403,7 +390,7 @@ def estimate(
     batch = np.broadcast_shapes(gyro.shape[:-2], eta.shape[:-1], eps.shape[:-1],
                                 los_px.shape[:-2])
     n_par = len(PARAMETER_NAMES)
-    rows7 = drift_matrix(t, gyro, eta, eps, camera)  # first-order model about zero
+    rows7 = drift_matrix(t, gyro, eta, eps, camera, reference=reference)  # first order about 0
     first_rows = np.concatenate([rows7[..., :ROLL], np.zeros((*rows7.shape[:-1], 1)),
                                  rows7[..., ROLL:]], axis=-1)
     k_x, k_z = float(camera.k_x), float(camera.k_z)

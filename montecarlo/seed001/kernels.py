@@ -4,16 +4,21 @@ Each kernel computes what a literal numpy function of :mod:`montecarlo.seed001.s
 :mod:`montecarlo.seed001.estimate` computes, in a loop over time instead of over whole arrays,
 and is tested equal to it to about 1e-12 on the same inputs:
 
-* :func:`magnus_attitude` - the carrier's attitude from its rate at the Gauss points
-  (:func:`montecarlo.seed001.estimate.carrier_attitude` after its spline), built on
-  :func:`rotation_prefix_product`;
-* :func:`target_pixels` - the target's image for given attitudes and camera angles (the end of
-  :func:`montecarlo.seed001.estimate.predict_los`);
+* :func:`predicted_pixels` - the image of the target predicted from the gyro output, the
+  carrier's attitude a prefix product of Magnus steps
+  (:func:`montecarlo.seed001.estimate.predict_los` after its spline);
+* :func:`rocking_gyro` - the carrier's rocking and the IMU output of the simulator;
+* :func:`target_directions` - the target's direction in the camera (the end of
+  :func:`montecarlo.seed001.simulate.simulate`);
+* :func:`rolled_integral` - the time integral of the first-order drift model
+  (:func:`montecarlo.seed001.linear_model.drift_matrix`);
 * :func:`rls_pass` - one pass of :func:`montecarlo.seed001.estimate.recursive_least_squares`;
 * :func:`rk4_gimbal` - :func:`montecarlo.seed001.simulate.integrate_gimbal`.
 
-Arrays have one batch axis (trials) first; callers flatten theirs. No fastmath: the kernels keep
-IEEE arithmetic, so they differ from the numpy path only in the order of operations.
+Arrays have one batch axis (trials) first; callers flatten theirs. Per-step matrices are kept in
+registers, never stored: arrays of them for a batch of runs take tens of MB, and touching fresh
+memory costs more than the arithmetic. No fastmath: the kernels keep IEEE arithmetic and differ
+from the numpy path only in the order of operations.
 
 References
 ----------
@@ -30,135 +35,210 @@ SERIES_ANGLE_SQ = 2.5e-3
 from its Taylor series (terms up to angle^8; the first omitted term is below 3e-23)."""
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _magnus_step(h, w1, w2, T, bias):  # pragma: no cover - compiled
+    """Rotation matrix (9 entries, row by row) of one step of :func:`predicted_pixels`."""
+    u0, u1, u2 = w1[0] - bias[0], w1[1] - bias[1], w1[2] - bias[2]
+    x0 = T[0, 0] * u0 + T[0, 1] * u1 + T[0, 2] * u2
+    x1 = T[1, 0] * u0 + T[1, 1] * u1 + T[1, 2] * u2
+    x2 = T[2, 0] * u0 + T[2, 1] * u1 + T[2, 2] * u2
+    u0, u1, u2 = w2[0] - bias[0], w2[1] - bias[1], w2[2] - bias[2]
+    y0 = T[0, 0] * u0 + T[0, 1] * u1 + T[0, 2] * u2
+    y1 = T[1, 0] * u0 + T[1, 1] * u1 + T[1, 2] * u2
+    y2 = T[2, 0] * u0 + T[2, 1] * u1 + T[2, 2] * u2
+    hh, cc = 0.5 * h, np.sqrt(3.0) / 12.0 * (h * h)
+    vx = hh * (x0 + y0) + cc * (x1 * y2 - x2 * y1)
+    vy = hh * (x1 + y1) + cc * (x2 * y0 - x0 * y2)
+    vz = hh * (x2 + y2) + cc * (x0 * y1 - x1 * y0)
+    a2 = vx * vx + vy * vy + vz * vz
+    if a2 < SERIES_ANGLE_SQ:
+        scale = 0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 + a2 * (
+            -1.0 / 645120.0 + a2 / 185794560.0)))
+        qw = 1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 + a2 * (
+            -1.0 / 46080.0 + a2 / 10321920.0)))
+    else:
+        angle = np.sqrt(a2)
+        scale = np.sin(0.5 * angle) / angle
+        qw = np.cos(0.5 * angle)
+    qx, qy, qz = scale * vx, scale * vy, scale * vz
+    return (qx * qx - qy * qy - qz * qz + qw * qw, 2.0 * (qx * qy - qz * qw),
+            2.0 * (qx * qz + qy * qw), 2.0 * (qx * qy + qz * qw),
+            -qx * qx + qy * qy - qz * qz + qw * qw, 2.0 * (qy * qz - qx * qw),
+            2.0 * (qx * qz - qy * qw), 2.0 * (qy * qz + qx * qw),
+            -qx * qx - qy * qy + qz * qz + qw * qw)
+
+
 @nb.njit(cache=True, nogil=True)
-def rotation_prefix_product(steps):  # pragma: no cover - compiled
-    """Products ``steps_0 steps_1 ... steps_{k-1}`` for every ``k``, identity first.
+def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, offset, k_x, k_z,
+                     base, step, out):  # pragma: no cover - compiled
+    """Image of the target the camera aimed at at ``t_0``, seen from the rocking carrier.
+
+    The carrier's attitude ``R_k = C_{b_k}^{b_0}`` is the prefix product of the steps'
+    rotations; each step turns by the fourth-order Magnus vector ``h/2 (r1 + r2) +
+    sqrt(3)/12 h^2 r1 x r2`` of the rate ``r = transform_b (w - bias_b)`` at its two Gauss
+    points, made a matrix through its quaternion (as ``scipy.spatial.transform.Rotation``). The
+    camera is ``C_k = R_y(dpy) R_x(eps_k + dpx) R_z(eta_k + dz)`` (seed 000, eq. (5), seed 001,
+    eq. (2)), the target row y of ``C_0``, its direction ``u_k = C_k R_k^T target`` and its
+    image ``x = [k_x u_x / u_y, k_z u_z / u_y]``.
 
     Parameters
     ----------
-    steps : ndarray, shape (B, M, 3, 3)
-
-    Returns
-    -------
-    ndarray, shape (B, M + 1, 3, 3)
-    """
-    n_b, m = steps.shape[0], steps.shape[1]
-    out = np.empty((n_b, m + 1, 3, 3))
-    for b in range(n_b):
-        for i in range(3):
-            for j in range(3):
-                out[b, 0, i, j] = 1.0 if i == j else 0.0
-        for k in range(m):
-            for i in range(3):
-                a0, a1, a2 = out[b, k, i, 0], out[b, k, i, 1], out[b, k, i, 2]
-                for j in range(3):
-                    out[b, k + 1, i, j] = (a0 * steps[b, k, 0, j] + a1 * steps[b, k, 1, j]
-                                           + a2 * steps[b, k, 2, j])
-    return out
-
-
-@nb.njit(cache=True, nogil=True)
-def magnus_attitude(h, w1, w2, transform, bias):  # pragma: no cover - compiled
-    """Attitude ``C_{b_k}^{b_0}`` from the rate at the two Gauss points of each step.
-
-    The rate is ``transform_b (w - bias_b)``; each step turns by the fourth-order Magnus vector
-    ``h/2 (r1 + r2) + sqrt(3)/12 h^2 r1 x r2``, made a rotation matrix through its quaternion
-    (active, as ``scipy.spatial.transform.Rotation.from_rotvec(...).as_matrix()``).
-
-    Parameters
-    ----------
-    h : ndarray, shape (M,) [s]
+    h : ndarray, shape (N - 1,) [s]
         Step lengths.
-    w1, w2 : ndarray, shape (B, M, 3) [rad/s]
-        Rates at ``t_mid -/+ h sqrt(3)/6``.
+    w1, w2 : ndarray, shape (B, N - 1, 3) [rad/s]
+        Rate at ``t_mid -/+ h sqrt(3)/6`` of each step.
     transform : ndarray, shape (B, 3, 3)
+    bias : ndarray, shape (B, 3) [rad/s]
+    c_eta, s_eta, c_eps, s_eps : ndarray, shape (B, N)
+        Cosines and sines of the gimbal angles (the camera's angles by the sum formulas).
+    offset : ndarray, shape (B, 3) [rad]
+        ``[dz, dpx, dpy]``.
+    k_x, k_z : float [px]
+    base : ndarray, shape (B, N, 2) [px]
+    step : float
+        0: ``out = x``; else ``out = (x - base) / step`` (a forward difference).
+    out : ndarray, shape (B, N, 2)
+        Filled with the image [px] or its difference quotient.
+
+    References
+    ----------
+    seed 001, eqs. (1)-(2).
+    """
+    for b in range(out.shape[0]):
+        T, bb = transform[b], bias[b]
+        ca_o, sa_o = np.cos(offset[b, 0]), np.sin(offset[b, 0])
+        ce_o, se_o = np.cos(offset[b, 1]), np.sin(offset[b, 1])
+        g_c, g_s = np.cos(offset[b, 2]), np.sin(offset[b, 2])
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        t0 = t1 = t2 = 0.0
+        for k in range(out.shape[1]):
+            if k > 0:
+                s00, s01, s02, s10, s11, s12, s20, s21, s22 = _magnus_step(
+                    h[k - 1], w1[b, k - 1], w2[b, k - 1], T, bb)
+                r00, r01, r02 = (r00 * s00 + r01 * s10 + r02 * s20,
+                                 r00 * s01 + r01 * s11 + r02 * s21,
+                                 r00 * s02 + r01 * s12 + r02 * s22)
+                r10, r11, r12 = (r10 * s00 + r11 * s10 + r12 * s20,
+                                 r10 * s01 + r11 * s11 + r12 * s21,
+                                 r10 * s02 + r11 * s12 + r12 * s22)
+                r20, r21, r22 = (r20 * s00 + r21 * s10 + r22 * s20,
+                                 r20 * s01 + r21 * s11 + r22 * s21,
+                                 r20 * s02 + r21 * s12 + r22 * s22)
+            cp = c_eta[b, k] * ca_o - s_eta[b, k] * sa_o  # camera azimuth eta + dz
+            sp = s_eta[b, k] * ca_o + c_eta[b, k] * sa_o
+            ct = c_eps[b, k] * ce_o - s_eps[b, k] * se_o  # camera pitch eps + dpx
+            st = s_eps[b, k] * ce_o + c_eps[b, k] * se_o
+            if k == 0:
+                t0, t1, t2 = -ct * sp, ct * cp, st
+            v0 = r00 * t0 + r10 * t1 + r20 * t2  # R_k^T target
+            v1 = r01 * t0 + r11 * t1 + r21 * t2
+            v2 = r02 * t0 + r12 * t1 + r22 * t2
+            u0 = (g_c * cp - g_s * st * sp) * v0 + (g_c * sp + g_s * st * cp) * v1 - g_s * ct * v2
+            u1 = -ct * sp * v0 + ct * cp * v1 + st * v2
+            u2 = (g_s * cp + g_c * st * sp) * v0 + (g_s * sp - g_c * st * cp) * v1 + g_c * ct * v2
+            x, z = k_x * u0 / u1, k_z * u2 / u1
+            if step != 0.0:
+                x, z = (x - base[b, k, 0]) / step, (z - base[b, k, 1]) / step
+            out[b, k, 0], out[b, k, 1] = x, z
+
+
+@nb.njit(cache=True, nogil=True)
+def rocking_gyro(t, amplitude, frequency, phase, imu, bias):  # pragma: no cover - compiled
+    """Sinusoidal rocking and the noise-free output of an IMU on the carrier.
+
+    Angles ``a sin(2 pi f t + phase)`` (yaw, pitch, roll; Z-X-Y), the body rate
+    ``w_b = [c_g th' - s_g c_th psi', ga' + s_th psi', s_g th' + c_g c_th psi']`` and the IMU
+    output ``imu_b w_b + bias_b`` (:class:`montecarlo.seed001.kinematics.Rocking`,
+    :func:`montecarlo.seed001.kinematics.measured_rate`).
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,) [s]
+    amplitude, frequency, phase : ndarray, shape (B, 3) [rad], [Hz], [rad]
+    imu : ndarray, shape (B, 3, 3)
+        ``C_b^g``.
     bias : ndarray, shape (B, 3) [rad/s]
 
     Returns
     -------
-    ndarray, shape (B, M + 1, 3, 3)
+    angles : ndarray, shape (B, M, 3) [rad]
+    output : ndarray, shape (B, M, 3) [rad/s]
+
+    References
+    ----------
+    seed 001, eq. (1).
     """
-    n_b, m = w1.shape[0], w1.shape[1]
-    c3 = np.sqrt(3.0) / 12.0
-    steps = np.empty((n_b, m, 3, 3))
-    r1 = np.empty(3)
-    r2 = np.empty(3)
+    n_b, m = amplitude.shape[0], t.size
+    angles = np.empty((n_b, m, 3))
+    output = np.empty((n_b, m, 3))
+    a = np.empty(3)
+    w = np.empty(3)
     for b in range(n_b):
-        T = transform[b]
+        for i in range(3):
+            w[i] = 2.0 * np.pi * frequency[b, i]
+        M = imu[b]
         for k in range(m):
             for i in range(3):
-                r1[i] = (T[i, 0] * (w1[b, k, 0] - bias[b, 0]) + T[i, 1] * (w1[b, k, 1] - bias[b, 1])
-                         + T[i, 2] * (w1[b, k, 2] - bias[b, 2]))
-                r2[i] = (T[i, 0] * (w2[b, k, 0] - bias[b, 0]) + T[i, 1] * (w2[b, k, 1] - bias[b, 1])
-                         + T[i, 2] * (w2[b, k, 2] - bias[b, 2]))
-            hh, cc = 0.5 * h[k], c3 * h[k] * h[k]
-            vx = hh * (r1[0] + r2[0]) + cc * (r1[1] * r2[2] - r1[2] * r2[1])
-            vy = hh * (r1[1] + r2[1]) + cc * (r1[2] * r2[0] - r1[0] * r2[2])
-            vz = hh * (r1[2] + r2[2]) + cc * (r1[0] * r2[1] - r1[1] * r2[0])
-            a2 = vx * vx + vy * vy + vz * vz
-            if a2 < SERIES_ANGLE_SQ:
-                scale = 0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 + a2 * (
-                    -1.0 / 645120.0 + a2 / 185794560.0)))
-                qw = 1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 + a2 * (
-                    -1.0 / 46080.0 + a2 / 10321920.0)))
-            else:
-                angle = np.sqrt(a2)
-                scale = np.sin(0.5 * angle) / angle
-                qw = np.cos(0.5 * angle)
-            qx, qy, qz = scale * vx, scale * vy, scale * vz
-            s = steps[b, k]
-            s[0, 0] = qx * qx - qy * qy - qz * qz + qw * qw
-            s[1, 1] = -qx * qx + qy * qy - qz * qz + qw * qw
-            s[2, 2] = -qx * qx - qy * qy + qz * qz + qw * qw
-            s[0, 1] = 2.0 * (qx * qy - qz * qw)
-            s[1, 0] = 2.0 * (qx * qy + qz * qw)
-            s[0, 2] = 2.0 * (qx * qz + qy * qw)
-            s[2, 0] = 2.0 * (qx * qz - qy * qw)
-            s[1, 2] = 2.0 * (qy * qz - qx * qw)
-            s[2, 1] = 2.0 * (qy * qz + qx * qw)
-    return rotation_prefix_product(steps)
+                arg = w[i] * t[k] + phase[b, i]
+                angles[b, k, i] = amplitude[b, i] * np.sin(arg)
+                a[i] = amplitude[b, i] * w[i] * np.cos(arg)
+            theta, gamma = angles[b, k, 1], angles[b, k, 2]
+            cg, sg, ct, st = np.cos(gamma), np.sin(gamma), np.cos(theta), np.sin(theta)
+            w0 = cg * a[1] - sg * ct * a[0]
+            w1 = a[2] + st * a[0]
+            w2 = sg * a[1] + cg * ct * a[0]
+            for i in range(3):
+                output[b, k, i] = (M[i, 0] * w0 + M[i, 1] * w1 + M[i, 2] * w2) + bias[b, i]
+    return angles, output
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _zxy(cp, sp, ct, st, cg, sg):  # pragma: no cover - compiled
+    """``R_y(gamma) R_x(theta) R_z(psi)`` from cosines and sines, seed 000, eq. (5)
+    (:func:`montecarlo.geometry.rotations.mounting_matrix`); 9 entries, row by row."""
+    return (cg * cp - sg * st * sp, cg * sp + sg * st * cp, -sg * ct,
+            -ct * sp, ct * cp, st,
+            sg * cp + cg * st * sp, sg * sp - cg * st * cp, cg * ct)
 
 
 @nb.njit(cache=True, nogil=True)
-def target_pixels(R, target, ca, sa, ce, se, cr, sr, k_x, k_z):  # pragma: no cover - compiled
-    """Image of a fixed target seen through a camera turned by ``R_y(r) R_x(e) R_z(a)``.
+def target_directions(carrier, camera, out):  # pragma: no cover - compiled
+    """Direction in the camera of the target its LOS aimed at at ``t_0``.
 
-    ``u = C (R_k^T target)`` with ``C = mounting_matrix(a_k, e_k, r)`` (seed 001, eq. (2));
-    pixels ``[k_x u_x / u_y, k_z u_z / u_y]``.
+    ``u_k = C_b^c(k) C_n^b(k) target``, both matrices Z-X-Y (seed 000, eq. (5)), ``target`` row
+    y of ``C_b^c(0) C_n^b(0)`` (in frame n).
 
     Parameters
     ----------
-    R : ndarray, shape (B, N, 3, 3)
-        Carrier attitudes ``C_{b_k}^{b_0}``.
-    target : ndarray, shape (B, 3)
-        Target direction in the carrier frame at ``t_0``.
-    ca, sa, ce, se : ndarray, shape (B, N)
-        Cosine and sine of the azimuth ``a_k`` and pitch ``e_k`` of the camera.
-    cr, sr : ndarray, shape (B,)
-        Cosine and sine of the roll ``r``.
-    k_x, k_z : float [px]
+    carrier, camera : ndarray, shape (6, B, N)
+        Cosines and sines ``[c_psi, s_psi, c_theta, s_theta, c_gamma, s_gamma]`` of the
+        carrier's angles and of the camera's (seed 001, eq. (2)).
+    out : ndarray, shape (B, N, 3)
+        Filled with the directions.
 
-    Returns
-    -------
-    ndarray, shape (B, N, 2) [px]
+    References
+    ----------
+    seed 001, eq. (2).
     """
-    n_b, n = R.shape[0], R.shape[1]
-    out = np.empty((n_b, n, 2))
-    for b in range(n_b):
-        t0, t1, t2 = target[b, 0], target[b, 1], target[b, 2]
-        cg, sg = cr[b], sr[b]
-        for k in range(n):
-            Rk = R[b, k]
-            v0 = Rk[0, 0] * t0 + Rk[1, 0] * t1 + Rk[2, 0] * t2
-            v1 = Rk[0, 1] * t0 + Rk[1, 1] * t1 + Rk[2, 1] * t2
-            v2 = Rk[0, 2] * t0 + Rk[1, 2] * t1 + Rk[2, 2] * t2
-            cp, sp, ct, st = ca[b, k], sa[b, k], ce[b, k], se[b, k]
-            u0 = (cg * cp - sg * st * sp) * v0 + (cg * sp + sg * st * cp) * v1 - sg * ct * v2
-            u1 = -ct * sp * v0 + ct * cp * v1 + st * v2
-            u2 = (sg * cp + cg * st * sp) * v0 + (sg * sp - cg * st * cp) * v1 + cg * ct * v2
-            out[b, k, 0] = k_x * u0 / u1
-            out[b, k, 1] = k_z * u2 / u1
-    return out
+    for b in range(out.shape[0]):
+        n = _zxy(carrier[0, b, 0], carrier[1, b, 0], carrier[2, b, 0], carrier[3, b, 0],
+                 carrier[4, b, 0], carrier[5, b, 0])
+        c = _zxy(camera[0, b, 0], camera[1, b, 0], camera[2, b, 0], camera[3, b, 0],
+                 camera[4, b, 0], camera[5, b, 0])
+        t0 = n[0] * c[3] + n[3] * c[4] + n[6] * c[5]  # C_n^b(0)^T (row y of C_b^c(0))
+        t1 = n[1] * c[3] + n[4] * c[4] + n[7] * c[5]
+        t2 = n[2] * c[3] + n[5] * c[4] + n[8] * c[5]
+        for k in range(out.shape[1]):
+            n = _zxy(carrier[0, b, k], carrier[1, b, k], carrier[2, b, k], carrier[3, b, k],
+                     carrier[4, b, k], carrier[5, b, k])
+            c = _zxy(camera[0, b, k], camera[1, b, k], camera[2, b, k], camera[3, b, k],
+                     camera[4, b, k], camera[5, b, k])
+            v0 = n[0] * t0 + n[1] * t1 + n[2] * t2
+            v1 = n[3] * t0 + n[4] * t1 + n[5] * t2
+            v2 = n[6] * t0 + n[7] * t1 + n[8] * t2
+            out[b, k, 0] = c[0] * v0 + c[1] * v1 + c[2] * v2
+            out[b, k, 1] = c[3] * v0 + c[4] * v1 + c[5] * v2
+            out[b, k, 2] = c[6] * v0 + c[7] * v1 + c[8] * v2
 
 
 @nb.njit(cache=True, nogil=True)
@@ -248,12 +328,56 @@ def rls_pass(rows, obs, prior_mean, prior_cov, noise_var, forgetting, walk_trans
                 K[i, 1] = pat[i, 0] * i01 + pat[i, 1] * i11
             for i in range(q):
                 x[i] += K[i, 0] * r0 + K[i, 1] * r1
-            for i in range(q):
+            for i in range(q):  # P - K PAt^T, kept exactly symmetric
+                k0, k1 = K[i, 0], K[i, 1]
                 for j in range(i + 1):
-                    a = P[i, j] - (K[i, 0] * pat[j, 0] + K[i, 1] * pat[j, 1])
-                    c = P[j, i] - (K[j, 0] * pat[i, 0] + K[j, 1] * pat[i, 1])
-                    P[i, j] = P[j, i] = 0.5 * (a + c)
+                    v = P[i, j] - (k0 * pat[j, 0] + k1 * pat[j, 1])
+                    P[i, j] = v
+                    P[j, i] = v
     return X, Ps
+
+
+@nb.njit(cache=True, nogil=True)
+def rolled_integral(t, rho, rate):  # pragma: no cover - compiled
+    """``R(rho_k) int_0^{t_k} R(-rho) rate dt`` by the trapezoidal rule, ``R`` a plane turn.
+
+    ``R(a) = [[cos a, -sin a], [sin a, cos a]]``; the sum runs in the order of
+    ``scipy.integrate.cumulative_trapezoid``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,) [s]
+    rho : ndarray, shape (B, N) [rad]
+    rate : ndarray, shape (B, N, 2, c)
+
+    Returns
+    -------
+    ndarray, shape (B, N, 2, c)
+
+    References
+    ----------
+    seed 001, eqs. (5)-(6) integrated over time
+    (:func:`montecarlo.seed001.linear_model.drift_matrix`).
+    """
+    n_b, n, n_c = rate.shape[0], rate.shape[1], rate.shape[3]
+    out = np.empty(rate.shape)
+    acc = np.zeros((2, n_c))
+    prev = np.empty((2, n_c))
+    for b in range(n_b):
+        acc[:] = 0.0
+        for k in range(n):
+            c, s = np.cos(rho[b, k]), np.sin(rho[b, k])
+            for j in range(n_c):
+                y0 = c * rate[b, k, 0, j] + s * rate[b, k, 1, j]  # R(-rho) rate
+                y1 = -s * rate[b, k, 0, j] + c * rate[b, k, 1, j]
+                if k > 0:
+                    d = t[k] - t[k - 1]
+                    acc[0, j] += d * (prev[0, j] + y0) / 2.0
+                    acc[1, j] += d * (prev[1, j] + y1) / 2.0
+                prev[0, j], prev[1, j] = y0, y1
+                out[b, k, 0, j] = c * acc[0, j] - s * acc[1, j]
+                out[b, k, 1, j] = s * acc[0, j] + c * acc[1, j]
+    return out
 
 
 @nb.njit(cache=True, nogil=True)
@@ -264,15 +388,23 @@ def _gimbal_rates(wx, wy, wz, eta, eps):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, nogil=True)
-def rk4_gimbal(h, stages, eta0, eps0, offset_eta, offset_eps):  # pragma: no cover - compiled
+def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_eps
+               ):  # pragma: no cover - compiled
     """Gimbal angles of eq. (4) integrated by the classical Runge-Kutta method.
+
+    The loop's rate is ``transform_b (rate - bias_b) + transform_b noise_k``: the rate sampled at
+    the steps and their mid-points, white noise held over each step.
 
     Parameters
     ----------
     h : ndarray, shape (N - 1,) [s]
-    stages : ndarray, shape (B, N - 1, 3, 3) [rad/s]
-        Loop rate at ``t_k``, ``t_k + h/2``, ``t_{k+1}`` of each step (axis 2).
+    rate : ndarray, shape (B, 2 N - 1, 3) [rad/s]
+        At ``t_0, t_0 + h_0/2, t_1, ...``.
+    noise : ndarray, shape (B, N, 3) [rad/s]
+    transform : ndarray, shape (B, 3, 3)
+    bias : ndarray, shape (B, 3) [rad/s]
     eta0, eps0, offset_eta, offset_eps : ndarray, shape (B,) [rad]
+        Initial angles; offsets added where eq. (4) is evaluated.
 
     Returns
     -------
@@ -282,15 +414,24 @@ def rk4_gimbal(h, stages, eta0, eps0, offset_eta, offset_eps):  # pragma: no cov
     ----------
     seed 001, eq. (4).
     """
-    n_b, m = stages.shape[0], stages.shape[1]
+    n_b, m = rate.shape[0], (rate.shape[1] - 1) // 2
     eta = np.empty((n_b, m + 1))
     eps = np.empty((n_b, m + 1))
+    w = np.empty((3, 3))
     for b in range(n_b):
+        T = transform[b]
         e, p = eta0[b], eps0[b]
         oe, op = offset_eta[b], offset_eps[b]
         eta[b, 0], eps[b, 0] = e, p
         for k in range(m):
-            w = stages[b, k]
+            n0, n1, n2 = noise[b, k, 0], noise[b, k, 1], noise[b, k, 2]
+            for s in range(3):
+                r0 = rate[b, 2 * k + s, 0] - bias[b, 0]
+                r1 = rate[b, 2 * k + s, 1] - bias[b, 1]
+                r2 = rate[b, 2 * k + s, 2] - bias[b, 2]
+                for i in range(3):
+                    w[s, i] = ((T[i, 0] * r0 + T[i, 1] * r1 + T[i, 2] * r2)
+                               + (T[i, 0] * n0 + T[i, 1] * n1 + T[i, 2] * n2))
             hk = h[k]
             a1, b1 = _gimbal_rates(w[0, 0], w[0, 1], w[0, 2], e + oe, p + op)
             a2, b2 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a1 + oe,

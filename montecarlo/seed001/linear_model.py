@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
 from montecarlo.geometry.camera import Camera
+from montecarlo.seed001 import kernels
 from montecarlo.seed001.kinematics import as_vector, stack_vector
 from montecarlo.seed001.simulate import Record
 
@@ -169,6 +170,7 @@ def drift_matrix(
     eps: ArrayLike,
     camera: Camera,
     rate_matrix=None,
+    reference: bool = False,
 ) -> FloatArray:
     """First-order image drift of the target per unit parameter, from the rate model.
 
@@ -188,6 +190,9 @@ def drift_matrix(
     rate_matrix : callable, optional
         ``H(omega, eta, eps)`` of the rate model; :func:`los_rate_matrix` if omitted
         (:func:`patent_eq6_matrix` to see what the printed model would give).
+    reference : bool
+        Integrate with numpy and scipy instead of :func:`kernels.rolled_integral` (same
+        result to rounding).
 
     Returns
     -------
@@ -201,8 +206,16 @@ def drift_matrix(
     H = (rate_matrix or los_rate_matrix)(gyro, eta, eps)
     rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
-    integrand = np.matmul(plane_rotation(-rho), rate)
-    phi = np.matmul(plane_rotation(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
+    if reference:
+        integrand = np.matmul(plane_rotation(-rho), rate)
+        phi = np.matmul(plane_rotation(rho),
+                        cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
+    else:
+        shape = np.broadcast_shapes(rho.shape, rate.shape[:-2])
+        phi = kernels.rolled_integral(
+            t, np.ascontiguousarray(np.broadcast_to(rho, shape)).reshape(-1, t.size),
+            np.ascontiguousarray(np.broadcast_to(rate, (*shape, *rate.shape[-2:]))).reshape(
+                -1, *rate.shape[-3:])).reshape(*shape, *rate.shape[-2:])
     k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
     return np.stack([k_x * phi[..., 1, :], -k_z * phi[..., 0, :]], axis=-2)
 

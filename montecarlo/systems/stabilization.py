@@ -50,7 +50,8 @@ process at 60 s and 100 Hz)."""
 
 
 def run_trials(
-    params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
+    params: Mapping[str, float | int | str], rng: np.random.Generator, n: int,
+    reference: bool = False,
 ) -> dict[str, FloatArray]:
     """Simulate, estimate and compensate ``n`` independent calibration runs.
 
@@ -78,6 +79,9 @@ def run_trials(
         The only source of randomness.
     n : int
         Number of trials.
+    reference : bool
+        Simulate and estimate with the literal numpy functions instead of the compiled kernels
+        of :mod:`montecarlo.seed001.kernels` (the same results to rounding, many times slower).
 
     Returns
     -------
@@ -111,11 +115,12 @@ def run_trials(
     for lo in range(0, n, TRIAL_CHUNK):
         part = slice(lo, min(lo + TRIAL_CHUNK, n))
         rocking = Rocking(np.full(3, p["rock_amplitude"]), frequency, phase[part])
-        run = sim.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part], sim_rng)
+        run = sim.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part], sim_rng,
+                           reference=reference)
         est = estimate_record(run, setup, forgetting=p["forgetting"],
-                              max_passes=int(p["max_passes"]))
+                              max_passes=int(p["max_passes"]), reference=reference)
         rerun = sim.simulate(rocking, setup, delta_g[part], delta_p[part], bias[part],
-                              rerun_rng, compensation=est.compensation())
+                              rerun_rng, compensation=est.compensation(), reference=reference)
         chunks.append((est, run.los_error, rerun.los_error))
 
     values = np.concatenate([c[0].values for c in chunks])[:, [0, 1, 2, 3, ROLL]]
