@@ -193,9 +193,13 @@ class LosModel:
     def __init__(self, t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike,
                  camera: Camera) -> None:
         t = np.asarray(t, float)
-        spline = CubicSpline(t, np.asarray(gyro, float), axis=1)
+        gyro = np.ascontiguousarray(gyro, float)
         self.h = np.diff(t)
-        self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
+        if t.size >= 4:
+            self.w1, self.w2 = kernels.spline_at(t, gyro, *gauss_points(t))
+        else:
+            spline = CubicSpline(t, gyro, axis=1)
+            self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
         self.eta, self.eps = np.asarray(eta, float), np.asarray(eps, float)
         self.trig = [f(a) for a in (eta, eps) for f in (np.cos, np.sin)]
         self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)

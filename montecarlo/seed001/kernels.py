@@ -4,13 +4,15 @@ Each kernel computes what a literal numpy function of :mod:`montecarlo.seed001.s
 :mod:`montecarlo.seed001.estimate` computes, in a loop over time instead of over whole arrays,
 and is tested equal to it to about 1e-12 on the same inputs:
 
+* :func:`spline_at` - the cubic spline of the gyro output at the Gauss points
+  (``scipy.interpolate.CubicSpline``);
 * :func:`predicted_pixels` - the image of the target predicted from the gyro output, the
   carrier's attitude a prefix product of Magnus steps
   (:func:`montecarlo.seed001.estimate.predict_los` after its spline);
 * :func:`rocking_gyro` - the carrier's rocking and the IMU output of the simulator;
 * :func:`target_directions` - the target's direction in the camera (the end of
   :func:`montecarlo.seed001.simulate.simulate`);
-* :func:`rolled_integral` - the time integral of the first-order drift model
+* :func:`drift_rows` - the first-order drift model integrated over time
   (:func:`montecarlo.seed001.linear_model.drift_matrix`);
 * :func:`rls_pass` - one pass of :func:`montecarlo.seed001.estimate.recursive_least_squares`;
 * :func:`rk4_gimbal` - :func:`montecarlo.seed001.simulate.integrate_gimbal`.
@@ -33,6 +35,62 @@ import numpy as np
 SERIES_ANGLE_SQ = 2.5e-3
 """Below this squared step angle [rad^2] (0.05 rad) the quaternion of a rotation vector comes
 from its Taylor series (terms up to angle^8; the first omitted term is below 3e-23)."""
+
+
+@nb.njit(cache=True, nogil=True)
+def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
+    """Not-a-knot cubic spline of ``y(t)`` at two points inside each interval.
+
+    ``scipy.interpolate.CubicSpline(t, y, axis=1)`` evaluated at ``g1`` and ``g2``: the slopes
+    solve scipy's tridiagonal system (here by elimination without pivoting, for ``N >= 4``),
+    the piecewise polynomials are scipy's.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Increasing.
+    y : ndarray, shape (B, N, c)
+    g1, g2 : ndarray, shape (N - 1,)
+        Points of interval ``[t_k, t_{k+1}]``.
+
+    Returns
+    -------
+    ndarray, shape (B, N - 1, c), twice
+    """
+    n_b, n, n_c = y.shape[0], y.shape[1], y.shape[2]
+    dx = np.diff(t)
+    lower, diag, upper = np.empty(n), np.empty(n), np.empty(n)
+    diag[0], upper[0] = dx[1], t[2] - t[0]
+    for i in range(1, n - 1):
+        lower[i], diag[i], upper[i] = dx[i], 2 * (dx[i - 1] + dx[i]), dx[i - 1]
+    lower[n - 1], diag[n - 1] = t[n - 1] - t[n - 3], dx[n - 3]
+    d0, d1 = t[2] - t[0], t[n - 1] - t[n - 3]
+    slope, rhs, c_up, s = np.empty(n - 1), np.empty(n), np.empty(n), np.empty(n)
+    out1, out2 = np.empty((n_b, n - 1, n_c)), np.empty((n_b, n - 1, n_c))
+    for b in range(n_b):
+        for c in range(n_c):
+            for i in range(n - 1):
+                slope[i] = (y[b, i + 1, c] - y[b, i, c]) / dx[i]
+            rhs[0] = ((dx[0] + 2 * d0) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d0
+            for i in range(1, n - 1):
+                rhs[i] = 3 * (dx[i] * slope[i - 1] + dx[i - 1] * slope[i])
+            rhs[n - 1] = (dx[n - 2] ** 2 * slope[n - 3]
+                          + (2 * d1 + dx[n - 2]) * dx[n - 3] * slope[n - 2]) / d1
+            c_up[0] = upper[0] / diag[0]  # forward elimination
+            s[0] = rhs[0] / diag[0]
+            for i in range(1, n):
+                m = diag[i] - lower[i] * c_up[i - 1]
+                c_up[i] = upper[i] / m
+                s[i] = (rhs[i] - lower[i] * s[i - 1]) / m
+            for i in range(n - 2, -1, -1):  # back substitution
+                s[i] -= c_up[i] * s[i + 1]
+            for i in range(n - 1):
+                tt = (s[i] + s[i + 1] - 2 * slope[i]) / dx[i]
+                p0, p1, p2, p3 = tt / dx[i], (slope[i] - s[i]) / dx[i] - tt, s[i], y[b, i, c]
+                for g, out in ((g1[i], out1), (g2[i], out2)):
+                    z = g - t[i]
+                    out[b, i, c] = p3 + p2 * z + p1 * (z * z) + p0 * (z * z * z)
+    return out1, out2
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -338,45 +396,66 @@ def rls_pass(rows, obs, prior_mean, prior_cov, noise_var, forgetting, walk_trans
 
 
 @nb.njit(cache=True, nogil=True)
-def rolled_integral(t, rho, rate):  # pragma: no cover - compiled
-    """``R(rho_k) int_0^{t_k} R(-rho) rate dt`` by the trapezoidal rule, ``R`` a plane turn.
+def drift_rows(t, gyro, eta, eps, k_x, k_z):  # pragma: no cover - compiled
+    """First-order image drift of the target per unit parameter (seed 001, eqs. (5)-(6)).
 
-    ``R(a) = [[cos a, -sin a], [sin a, cos a]]``; the sum runs in the order of
-    ``scipy.integrate.cumulative_trapezoid``.
+    :func:`montecarlo.seed001.linear_model.drift_matrix` with its default rate model: the rate
+    rows ``[H, G]`` (:func:`~montecarlo.seed001.linear_model.los_rate_matrix`,
+    :func:`~montecarlo.seed001.linear_model.bias_rate_matrix`), turned back by the image roll
+    ``rho`` (:func:`~montecarlo.seed001.linear_model.image_roll_rate` integrated), integrated,
+    turned forward, and scaled to pixels ``[k_x phi_z, -k_z phi_x]``. Trapezoidal sums run in
+    the order of ``scipy.integrate.cumulative_trapezoid``.
 
     Parameters
     ----------
     t : ndarray, shape (N,) [s]
-    rho : ndarray, shape (B, N) [rad]
-    rate : ndarray, shape (B, N, 2, c)
+    gyro : ndarray, shape (B, N, 3) [rad/s]
+    eta, eps : ndarray, shape (B, N) [rad]
+    k_x, k_z : float [px]
 
     Returns
     -------
-    ndarray, shape (B, N, 2, c)
+    ndarray, shape (B, N, 2, 7) [px per rad, px per rad/s]
 
     References
     ----------
-    seed 001, eqs. (5)-(6) integrated over time
-    (:func:`montecarlo.seed001.linear_model.drift_matrix`).
+    seed 001, eqs. (5)-(6), re-derived and integrated over time.
     """
-    n_b, n, n_c = rate.shape[0], rate.shape[1], rate.shape[3]
-    out = np.empty(rate.shape)
-    acc = np.zeros((2, n_c))
-    prev = np.empty((2, n_c))
+    n_b, n = gyro.shape[0], gyro.shape[1]
+    out = np.empty((n_b, n, 2, 7))
+    rate = np.empty((2, 7))
+    acc = np.empty((2, 7))
+    prev = np.empty((2, 7))
     for b in range(n_b):
         acc[:] = 0.0
+        rho = roll_prev = 0.0
         for k in range(n):
-            c, s = np.cos(rho[b, k]), np.sin(rho[b, k])
-            for j in range(n_c):
-                y0 = c * rate[b, k, 0, j] + s * rate[b, k, 1, j]  # R(-rho) rate
-                y1 = -s * rate[b, k, 0, j] + c * rate[b, k, 1, j]
+            wx, wy, wz = gyro[b, k, 0], gyro[b, k, 1], gyro[b, k, 2]
+            ce, se = np.cos(eps[b, k]), np.sin(eps[b, k])
+            ca, sa = np.cos(eta[b, k]), np.sin(eta[b, k])
+            rate[0, 0], rate[0, 1], rate[0, 2] = 0.0, -sa * wz, ca * wz  # seed 001, eq. (6)
+            rate[0, 3] = ca * wy - sa * wx
+            rate[1, 0] = (sa * wx - ca * wy) / ce  # derived, cf. eq. (6)
+            rate[1, 1] = ce * wy + se * ca * wz
+            rate[1, 2] = -ce * wx + se * sa * wz
+            rate[1, 3] = se * (ca * wx + sa * wy)
+            rate[0, 4], rate[0, 5], rate[0, 6] = -ca, -sa, 0.0  # gyro bias
+            rate[1, 4], rate[1, 5], rate[1, 6] = -se * sa, se * ca, -ce
+            roll = (-sa * wx + ca * wy) / ce
+            if k > 0:
+                rho += (t[k] - t[k - 1]) * (roll_prev + roll) / 2.0
+            roll_prev = roll
+            c, s = np.cos(rho), np.sin(rho)
+            for j in range(7):
+                y0 = c * rate[0, j] + s * rate[1, j]  # R(-rho) rate
+                y1 = -s * rate[0, j] + c * rate[1, j]
                 if k > 0:
                     d = t[k] - t[k - 1]
                     acc[0, j] += d * (prev[0, j] + y0) / 2.0
                     acc[1, j] += d * (prev[1, j] + y1) / 2.0
                 prev[0, j], prev[1, j] = y0, y1
-                out[b, k, 0, j] = c * acc[0, j] - s * acc[1, j]
-                out[b, k, 1, j] = s * acc[0, j] + c * acc[1, j]
+                out[b, k, 0, j] = k_x * (s * acc[0, j] + c * acc[1, j])  # k_x phi_z
+                out[b, k, 1, j] = -k_z * (c * acc[0, j] - s * acc[1, j])  # -k_z phi_x
     return out
 
 

@@ -191,8 +191,8 @@ def drift_matrix(
         ``H(omega, eta, eps)`` of the rate model; :func:`los_rate_matrix` if omitted
         (:func:`patent_eq6_matrix` to see what the printed model would give).
     reference : bool
-        Integrate with numpy and scipy instead of :func:`kernels.rolled_integral` (same
-        result to rounding).
+        Compute with numpy and scipy instead of :func:`kernels.drift_rows` (same result to
+        rounding; always so with a ``rate_matrix``).
 
     Returns
     -------
@@ -203,20 +203,17 @@ def drift_matrix(
     t = np.asarray(t, float)
     gyro = np.asarray(gyro, float)
     eta, eps = np.asarray(eta, float), np.asarray(eps, float)
+    k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
+    if not reference and rate_matrix is None:
+        shape = np.broadcast_shapes(gyro.shape[:-1], eta.shape, eps.shape)
+        flat = [np.ascontiguousarray(np.broadcast_to(a, (*shape, *tail))).reshape(-1, t.size, *tail)
+                for a, tail in ((gyro, (3,)), (eta, ()), (eps, ()))]
+        return kernels.drift_rows(t, *flat, float(k_x), float(k_z)).reshape(*shape, 2, 7)
     H = (rate_matrix or los_rate_matrix)(gyro, eta, eps)
     rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
-    if reference:
-        integrand = np.matmul(plane_rotation(-rho), rate)
-        phi = np.matmul(plane_rotation(rho),
-                        cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
-    else:
-        shape = np.broadcast_shapes(rho.shape, rate.shape[:-2])
-        phi = kernels.rolled_integral(
-            t, np.ascontiguousarray(np.broadcast_to(rho, shape)).reshape(-1, t.size),
-            np.ascontiguousarray(np.broadcast_to(rate, (*shape, *rate.shape[-2:]))).reshape(
-                -1, *rate.shape[-3:])).reshape(*shape, *rate.shape[-2:])
-    k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
+    integrand = np.matmul(plane_rotation(-rho), rate)
+    phi = np.matmul(plane_rotation(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
     return np.stack([k_x * phi[..., 1, :], -k_z * phi[..., 0, :]], axis=-2)
 
 

@@ -203,8 +203,11 @@ def target_view_compiled(
                                 (*delta_p.shape[:-1], 1))
     angles = [rocking_angles[..., i] for i in range(3)] + [
         eta + delta_p[..., 2, None], eps + delta_p[..., 0, None], delta_p[..., 1, None]]
-    trig = np.stack([np.broadcast_to(f(a), shape).reshape(-1, shape[-1]) for a in angles
-                     for f in (np.cos, np.sin)])
+    trig = np.empty((12, *shape))
+    for i, a in enumerate(angles):
+        np.cos(a, out=trig[2 * i])
+        np.sin(a, out=trig[2 * i + 1])
+    trig = trig.reshape(12, -1, shape[-1])
     u = np.empty((*trig.shape[1:], 3))
     kernels.target_directions(trig[:6], trig[6:], u)  # seed 001, eq. (2)
     return u.reshape(*shape, 3)
