@@ -180,7 +180,8 @@ class LosModel:
     The gyro output is splined once (the spline is linear, so the rate of any parameters is
     the same affine map of the splined gyro output, applied by
     :func:`kernels.predicted_pixels`) and the cosines and sines of the gimbal angles are taken
-    once (the camera's follow by the sum formulas).
+    once (the camera's follow by the sum formulas). In the Jacobian, the columns of the camera
+    angles share one attitude.
 
     Parameters
     ----------
@@ -189,6 +190,10 @@ class LosModel:
     eta, eps : array_like, shape (B, N) [rad]
     camera : Camera
     """
+
+    CAMERA = (3, 0, ROLL)
+    """Parameters that turn the camera, ``[delta_z, delta_px, delta_py]``, in the order of
+    :func:`kernels.predicted_pixels`' offsets; the others move only the carrier's attitude."""
 
     def __init__(self, t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike,
                  camera: Camera) -> None:
@@ -206,30 +211,43 @@ class LosModel:
         self.shape = np.shape(eta)
         self._jacobian = np.empty((*self.shape, 2, len(PARAMETER_NAMES)))
 
-    def _pixels(self, p: FloatArray, out: FloatArray, base: FloatArray | None = None,
-                step: float = 0.0) -> FloatArray:
-        """Image of the target at parameters ``p``, or its difference quotient from ``base``."""
+    def _pixels(self, p: FloatArray, offsets: FloatArray, out: FloatArray,
+                columns: tuple[int, ...] = (0,), base: FloatArray | None = None,
+                steps: tuple[float, ...] = (0.0,)) -> None:
+        """Image of the target (or difference quotients from ``base``) with the attitude of
+        parameters ``p`` for each set of camera offsets (shape (S, B, 3))."""
         C_bg = mounting_matrix(0.0, p[:, 1], p[:, 2])  # seed 001, eq. (1) with dgz = 0
         kernels.predicted_pixels(self.h, self.w1, self.w2,
                                  np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
                                  np.ascontiguousarray(p[:, 5:8]), *self.trig,
-                                 np.ascontiguousarray(p[:, [3, 0, 4]]), self.k_x, self.k_z,
-                                 out if base is None else base, step, out)
-        return out
+                                 np.ascontiguousarray(offsets), self.k_x, self.k_z,
+                                 out[..., 0] if base is None else base,
+                                 np.array(steps, float), np.array(columns), out)
 
     def predict(self, params: ArrayLike) -> FloatArray:
         """:func:`predict_los` at ``params`` (shape (B, 8)), shape (B, N, 2) [px]."""
-        return self._pixels(np.asarray(params, float), np.empty((*self.shape, 2)))
+        p = np.asarray(params, float)
+        out = np.empty((*self.shape, 2, 1))
+        self._pixels(p, p[None, :, self.CAMERA], out)
+        return out[..., 0]
 
     def predict_and_jacobian(self, params: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:func:`predict_los` and :func:`los_jacobian` at ``params``, shapes (B, N, 2) and
         (B, N, 2, 8); the Jacobian is overwritten by the next call."""
         p = np.asarray(params, float)
         predicted = self.predict(p)
+        camera = []
         for j, h in enumerate(JACOBIAN_STEP):
             moved = p.copy()
             moved[:, j] += h
-            self._pixels(moved, self._jacobian[..., j], predicted, h)
+            if j in self.CAMERA:
+                camera.append(moved[:, self.CAMERA])
+            else:  # the attitude moves
+                self._pixels(moved, moved[None, :, self.CAMERA], self._jacobian, (j,),
+                             predicted, (h,))
+        columns = tuple(j for j in range(len(JACOBIAN_STEP)) if j in self.CAMERA)
+        self._pixels(p, np.stack(camera), self._jacobian, columns, predicted,
+                     tuple(JACOBIAN_STEP[list(columns)]))
         return predicted, self._jacobian
 
 

@@ -127,17 +127,18 @@ def _magnus_step(h, w1, w2, T, bias):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, nogil=True)
-def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, offset, k_x, k_z,
-                     base, step, out):  # pragma: no cover - compiled
+def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, offsets, k_x, k_z,
+                     base, steps, columns, out):  # pragma: no cover - compiled
     """Image of the target the camera aimed at at ``t_0``, seen from the rocking carrier.
 
     The carrier's attitude ``R_k = C_{b_k}^{b_0}`` is the prefix product of the steps'
     rotations; each step turns by the fourth-order Magnus vector ``h/2 (r1 + r2) +
     sqrt(3)/12 h^2 r1 x r2`` of the rate ``r = transform_b (w - bias_b)`` at its two Gauss
-    points, made a matrix through its quaternion (as ``scipy.spatial.transform.Rotation``). The
-    camera is ``C_k = R_y(dpy) R_x(eps_k + dpx) R_z(eta_k + dz)`` (seed 000, eq. (5), seed 001,
-    eq. (2)), the target row y of ``C_0``, its direction ``u_k = C_k R_k^T target`` and its
-    image ``x = [k_x u_x / u_y, k_z u_z / u_y]``.
+    points, made a matrix through its quaternion (as ``scipy.spatial.transform.Rotation``). For
+    each set ``s`` of camera offsets ``[dz, dpx, dpy]``, the camera is ``C_k = R_y(dpy)
+    R_x(eps_k + dpx) R_z(eta_k + dz)`` (seed 000, eq. (5), seed 001, eq. (2)), the target row y
+    of ``C_0``, its direction ``u_k = C_k R_k^T target`` and its image
+    ``x = [k_x u_x / u_y, k_z u_z / u_y]``.
 
     Parameters
     ----------
@@ -148,27 +149,31 @@ def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, off
     transform : ndarray, shape (B, 3, 3)
     bias : ndarray, shape (B, 3) [rad/s]
     c_eta, s_eta, c_eps, s_eps : ndarray, shape (B, N)
-        Cosines and sines of the gimbal angles (the camera's angles by the sum formulas).
-    offset : ndarray, shape (B, 3) [rad]
-        ``[dz, dpx, dpy]``.
+        Cosines and sines of the gimbal angles (the camera's angles follow by the sum formulas).
+    offsets : ndarray, shape (S, B, 3) [rad]
+        ``[dz, dpx, dpy]`` of each set.
     k_x, k_z : float [px]
     base : ndarray, shape (B, N, 2) [px]
-    step : float
-        0: ``out = x``; else ``out = (x - base) / step`` (a forward difference).
-    out : ndarray, shape (B, N, 2)
-        Filled with the image [px] or its difference quotient.
+    steps : ndarray, shape (S,)
+        0: ``x`` goes out; else the forward difference ``(x - base) / step``.
+    columns : ndarray of int, shape (S,)
+        Where each set goes along the last axis of ``out``.
+    out : ndarray, shape (B, N, 2, C)
 
     References
     ----------
     seed 001, eqs. (1)-(2).
     """
+    n_s = offsets.shape[0]
+    trig = np.empty((n_s, 6))
+    target = np.empty((n_s, 3))
     for b in range(out.shape[0]):
         T, bb = transform[b], bias[b]
-        ca_o, sa_o = np.cos(offset[b, 0]), np.sin(offset[b, 0])
-        ce_o, se_o = np.cos(offset[b, 1]), np.sin(offset[b, 1])
-        g_c, g_s = np.cos(offset[b, 2]), np.sin(offset[b, 2])
+        for i in range(n_s):
+            for j in range(3):
+                trig[i, 2 * j], trig[i, 2 * j + 1] = np.cos(offsets[i, b, j]), np.sin(
+                    offsets[i, b, j])
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
-        t0 = t1 = t2 = 0.0
         for k in range(out.shape[1]):
             if k > 0:
                 s00, s01, s02, s10, s11, s12, s20, s21, s22 = _magnus_step(
@@ -182,22 +187,28 @@ def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, off
                 r20, r21, r22 = (r20 * s00 + r21 * s10 + r22 * s20,
                                  r20 * s01 + r21 * s11 + r22 * s21,
                                  r20 * s02 + r21 * s12 + r22 * s22)
-            cp = c_eta[b, k] * ca_o - s_eta[b, k] * sa_o  # camera azimuth eta + dz
-            sp = s_eta[b, k] * ca_o + c_eta[b, k] * sa_o
-            ct = c_eps[b, k] * ce_o - s_eps[b, k] * se_o  # camera pitch eps + dpx
-            st = s_eps[b, k] * ce_o + c_eps[b, k] * se_o
-            if k == 0:
-                t0, t1, t2 = -ct * sp, ct * cp, st
-            v0 = r00 * t0 + r10 * t1 + r20 * t2  # R_k^T target
-            v1 = r01 * t0 + r11 * t1 + r21 * t2
-            v2 = r02 * t0 + r12 * t1 + r22 * t2
-            u0 = (g_c * cp - g_s * st * sp) * v0 + (g_c * sp + g_s * st * cp) * v1 - g_s * ct * v2
-            u1 = -ct * sp * v0 + ct * cp * v1 + st * v2
-            u2 = (g_s * cp + g_c * st * sp) * v0 + (g_s * sp - g_c * st * cp) * v1 + g_c * ct * v2
-            x, z = k_x * u0 / u1, k_z * u2 / u1
-            if step != 0.0:
-                x, z = (x - base[b, k, 0]) / step, (z - base[b, k, 1]) / step
-            out[b, k, 0], out[b, k, 1] = x, z
+            for i in range(n_s):
+                ca_o, sa_o, ce_o, se_o, g_c, g_s = (trig[i, 0], trig[i, 1], trig[i, 2],
+                                                    trig[i, 3], trig[i, 4], trig[i, 5])
+                cp = c_eta[b, k] * ca_o - s_eta[b, k] * sa_o  # camera azimuth eta + dz
+                sp = s_eta[b, k] * ca_o + c_eta[b, k] * sa_o
+                ct = c_eps[b, k] * ce_o - s_eps[b, k] * se_o  # camera pitch eps + dpx
+                st = s_eps[b, k] * ce_o + c_eps[b, k] * se_o
+                if k == 0:
+                    target[i, 0], target[i, 1], target[i, 2] = -ct * sp, ct * cp, st
+                t0, t1, t2 = target[i, 0], target[i, 1], target[i, 2]
+                v0 = r00 * t0 + r10 * t1 + r20 * t2  # R_k^T target
+                v1 = r01 * t0 + r11 * t1 + r21 * t2
+                v2 = r02 * t0 + r12 * t1 + r22 * t2
+                u0 = ((g_c * cp - g_s * st * sp) * v0 + (g_c * sp + g_s * st * cp) * v1
+                      - g_s * ct * v2)
+                u1 = -ct * sp * v0 + ct * cp * v1 + st * v2
+                u2 = ((g_s * cp + g_c * st * sp) * v0 + (g_s * sp - g_c * st * cp) * v1
+                      + g_c * ct * v2)
+                x, z = k_x * u0 / u1, k_z * u2 / u1
+                if steps[i] != 0.0:
+                    x, z = (x - base[b, k, 0]) / steps[i], (z - base[b, k, 1]) / steps[i]
+                out[b, k, 0, columns[i]], out[b, k, 1, columns[i]] = x, z
 
 
 @nb.njit(cache=True, nogil=True)

@@ -204,9 +204,8 @@ def target_view_compiled(
     angles = [rocking_angles[..., i] for i in range(3)] + [
         eta + delta_p[..., 2, None], eps + delta_p[..., 0, None], delta_p[..., 1, None]]
     trig = np.empty((12, *shape))
-    for i, a in enumerate(angles):
-        np.cos(a, out=trig[2 * i])
-        np.sin(a, out=trig[2 * i + 1])
+    for i, a in enumerate(angles):  # numpy's cosines and sines are vectorised
+        trig[2 * i], trig[2 * i + 1] = np.cos(a), np.sin(a)
     trig = trig.reshape(12, -1, shape[-1])
     u = np.empty((*trig.shape[1:], 3))
     kernels.target_directions(trig[:6], trig[6:], u)  # seed 001, eq. (2)
