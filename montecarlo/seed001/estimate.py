@@ -180,8 +180,8 @@ class LosModel:
     The gyro output is splined once (the spline is linear, so the rate of any parameters is
     the same affine map of the splined gyro output, applied by
     :func:`kernels.predicted_pixels`) and the cosines and sines of the gimbal angles are taken
-    once (the camera's follow by the sum formulas). In the Jacobian, the columns of the camera
-    angles share one attitude.
+    once (the camera's follow by the sum formulas). The prediction and the forward differences
+    of the Jacobian are one call; the columns of the camera angles share its attitude.
 
     Parameters
     ----------
@@ -192,8 +192,10 @@ class LosModel:
     """
 
     CAMERA = (3, 0, ROLL)
-    """Parameters that turn the camera, ``[delta_z, delta_px, delta_py]``, in the order of
-    :func:`kernels.predicted_pixels`' offsets; the others move only the carrier's attitude."""
+    """Parameters that turn the camera, ``[delta_z, delta_px, delta_py]`` (the offsets of
+    :func:`kernels.predicted_pixels`)."""
+    ATTITUDE = (1, 2, 5, 6, 7)
+    """Parameters that turn the carrier's attitude rebuilt from the gyro output."""
 
     def __init__(self, t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike,
                  camera: Camera) -> None:
@@ -209,46 +211,39 @@ class LosModel:
         self.trig = [f(a) for a in (eta, eps) for f in (np.cos, np.sin)]
         self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
         self.shape = np.shape(eta)
-        self._jacobian = np.empty((*self.shape, 2, len(PARAMETER_NAMES)))
 
-    def _pixels(self, p: FloatArray, offsets: FloatArray, out: FloatArray,
-                columns: tuple[int, ...] = (0,), base: FloatArray | None = None,
-                steps: tuple[float, ...] = (0.0,)) -> None:
-        """Image of the target (or difference quotients from ``base``) with the attitude of
-        parameters ``p`` for each set of camera offsets (shape (S, B, 3))."""
-        C_bg = mounting_matrix(0.0, p[:, 1], p[:, 2])  # seed 001, eq. (1) with dgz = 0
+    def _pixels(self, sets: FloatArray, steps: ArrayLike = (0.0,)) -> FloatArray:
+        """Image of the target at parameters ``sets[0]`` (shape (S, B, 8)) and the difference
+        quotients of the others, shape (B, N, 2, S)."""
+        C_bg = mounting_matrix(0.0, sets[..., 1], sets[..., 2])  # seed 001, eq. (1), dgz = 0
+        def first_equal(columns: tuple[int, ...]) -> NDArray[np.int64]:
+            """For each set, 0 if its ``columns`` equal those of set 0, else its own index."""
+            moved = np.any(sets[..., list(columns)] != sets[:1, ..., list(columns)], axis=(1, 2))
+            return np.where(moved, np.arange(len(sets)), 0)
+
+        out = np.empty((*self.shape, 2, len(sets)))
         kernels.predicted_pixels(self.h, self.w1, self.w2,
                                  np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
-                                 np.ascontiguousarray(p[:, 5:8]), *self.trig,
-                                 np.ascontiguousarray(offsets), self.k_x, self.k_z,
-                                 out[..., 0] if base is None else base,
-                                 np.array(steps, float), np.array(columns), out)
+                                 np.ascontiguousarray(sets[..., 5:8]),
+                                 first_equal(self.ATTITUDE), *self.trig,
+                                 np.ascontiguousarray(sets[..., list(self.CAMERA)]),
+                                 first_equal(self.CAMERA), self.k_x, self.k_z,
+                                 np.asarray(steps, float), out)
+        return out
 
     def predict(self, params: ArrayLike) -> FloatArray:
         """:func:`predict_los` at ``params`` (shape (B, 8)), shape (B, N, 2) [px]."""
-        p = np.asarray(params, float)
-        out = np.empty((*self.shape, 2, 1))
-        self._pixels(p, p[None, :, self.CAMERA], out)
-        return out[..., 0]
+        return self._pixels(np.asarray(params, float)[None])[..., 0]
 
     def predict_and_jacobian(self, params: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:func:`predict_los` and :func:`los_jacobian` at ``params``, shapes (B, N, 2) and
-        (B, N, 2, 8); the Jacobian is overwritten by the next call."""
+        (B, N, 2, 8)."""
         p = np.asarray(params, float)
-        predicted = self.predict(p)
-        camera = []
+        sets = np.repeat(p[None], 1 + p.shape[-1], axis=0)
         for j, h in enumerate(JACOBIAN_STEP):
-            moved = p.copy()
-            moved[:, j] += h
-            if j in self.CAMERA:
-                camera.append(moved[:, self.CAMERA])
-            else:  # the attitude moves
-                self._pixels(moved, moved[None, :, self.CAMERA], self._jacobian, (j,),
-                             predicted, (h,))
-        columns = tuple(j for j in range(len(JACOBIAN_STEP)) if j in self.CAMERA)
-        self._pixels(p, np.stack(camera), self._jacobian, columns, predicted,
-                     tuple(JACOBIAN_STEP[list(columns)]))
-        return predicted, self._jacobian
+            sets[1 + j, :, j] += h
+        out = self._pixels(sets, np.concatenate([[0.0], JACOBIAN_STEP]))
+        return out[..., 0], out[..., 1:]
 
 
 def recursive_least_squares(

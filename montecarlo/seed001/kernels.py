@@ -127,18 +127,18 @@ def _magnus_step(h, w1, w2, T, bias):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, nogil=True)
-def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, offsets, k_x, k_z,
-                     base, steps, columns, out):  # pragma: no cover - compiled
-    """Image of the target the camera aimed at at ``t_0``, seen from the rocking carrier.
+def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_eps, s_eps,
+                     offsets, camera_of, k_x, k_z, steps, out):  # pragma: no cover - compiled
+    """Image of the target the camera aimed at at ``t_0``, for several sets of parameters.
 
     The carrier's attitude ``R_k = C_{b_k}^{b_0}`` is the prefix product of the steps'
     rotations; each step turns by the fourth-order Magnus vector ``h/2 (r1 + r2) +
-    sqrt(3)/12 h^2 r1 x r2`` of the rate ``r = transform_b (w - bias_b)`` at its two Gauss
-    points, made a matrix through its quaternion (as ``scipy.spatial.transform.Rotation``). For
-    each set ``s`` of camera offsets ``[dz, dpx, dpy]``, the camera is ``C_k = R_y(dpy)
-    R_x(eps_k + dpx) R_z(eta_k + dz)`` (seed 000, eq. (5), seed 001, eq. (2)), the target row y
-    of ``C_0``, its direction ``u_k = C_k R_k^T target`` and its image
-    ``x = [k_x u_x / u_y, k_z u_z / u_y]``.
+    sqrt(3)/12 h^2 r1 x r2`` of the rate ``r = transform (w - bias)`` at its two Gauss points,
+    made a matrix through its quaternion (as ``scipy.spatial.transform.Rotation``). With camera
+    offsets ``[dz, dpx, dpy]`` the camera is ``C_k = R_y(dpy) R_x(eps_k + dpx) R_z(eta_k + dz)``
+    (seed 000, eq. (5), seed 001, eq. (2)), the target row y of ``C_0``, its direction
+    ``u_k = C_k R_k^T target`` and its image ``x = [k_x u_x / u_y, k_z u_z / u_y]``. The sets'
+    attitudes advance together, one step for all (independent chains keep the processor busy).
 
     Parameters
     ----------
@@ -146,19 +146,22 @@ def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, off
         Step lengths.
     w1, w2 : ndarray, shape (B, N - 1, 3) [rad/s]
         Rate at ``t_mid -/+ h sqrt(3)/6`` of each step.
-    transform : ndarray, shape (B, 3, 3)
-    bias : ndarray, shape (B, 3) [rad/s]
+    transform : ndarray, shape (S, B, 3, 3)
+    bias : ndarray, shape (S, B, 3) [rad/s]
+    attitude_of : ndarray of int, shape (S,)
+        Set whose attitude set ``s`` uses (``s`` itself, or an earlier set with the same
+        transform and bias).
     c_eta, s_eta, c_eps, s_eps : ndarray, shape (B, N)
         Cosines and sines of the gimbal angles (the camera's angles follow by the sum formulas).
     offsets : ndarray, shape (S, B, 3) [rad]
-        ``[dz, dpx, dpy]`` of each set.
+        Camera offsets ``[dz, dpx, dpy]`` of each set.
+    camera_of : ndarray of int, shape (S,)
+        Set whose camera set ``s`` uses (``s`` itself, or an earlier set with the same offsets).
     k_x, k_z : float [px]
-    base : ndarray, shape (B, N, 2) [px]
     steps : ndarray, shape (S,)
-        0: ``x`` goes out; else the forward difference ``(x - base) / step``.
-    columns : ndarray of int, shape (S,)
-        Where each set goes along the last axis of ``out``.
-    out : ndarray, shape (B, N, 2, C)
+        0 for set 0; else set ``s`` gives the forward difference ``(x_s - x_0) / step_s``.
+    out : ndarray, shape (B, N, 2, S)
+        Filled with the image of set 0 [px] and the differences of the others.
 
     References
     ----------
@@ -167,48 +170,59 @@ def predicted_pixels(h, w1, w2, transform, bias, c_eta, s_eta, c_eps, s_eps, off
     n_s = offsets.shape[0]
     trig = np.empty((n_s, 6))
     target = np.empty((n_s, 3))
+    R = np.empty((n_s, 9))
+    C = np.empty((n_s, 9))
     for b in range(out.shape[0]):
-        T, bb = transform[b], bias[b]
         for i in range(n_s):
             for j in range(3):
-                trig[i, 2 * j], trig[i, 2 * j + 1] = np.cos(offsets[i, b, j]), np.sin(
-                    offsets[i, b, j])
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+                trig[i, 2 * j] = np.cos(offsets[i, b, j])
+                trig[i, 2 * j + 1] = np.sin(offsets[i, b, j])
+            for j in range(9):
+                R[i, j] = 1.0 if j % 4 == 0 else 0.0
         for k in range(out.shape[1]):
             if k > 0:
-                s00, s01, s02, s10, s11, s12, s20, s21, s22 = _magnus_step(
-                    h[k - 1], w1[b, k - 1], w2[b, k - 1], T, bb)
-                r00, r01, r02 = (r00 * s00 + r01 * s10 + r02 * s20,
-                                 r00 * s01 + r01 * s11 + r02 * s21,
-                                 r00 * s02 + r01 * s12 + r02 * s22)
-                r10, r11, r12 = (r10 * s00 + r11 * s10 + r12 * s20,
-                                 r10 * s01 + r11 * s11 + r12 * s21,
-                                 r10 * s02 + r11 * s12 + r12 * s22)
-                r20, r21, r22 = (r20 * s00 + r21 * s10 + r22 * s20,
-                                 r20 * s01 + r21 * s11 + r22 * s21,
-                                 r20 * s02 + r21 * s12 + r22 * s22)
+                for i in range(n_s):
+                    if attitude_of[i] != i:
+                        continue
+                    s00, s01, s02, s10, s11, s12, s20, s21, s22 = _magnus_step(
+                        h[k - 1], w1[b, k - 1], w2[b, k - 1], transform[i, b], bias[i, b])
+                    for r in range(3):
+                        a0, a1, a2 = R[i, 3 * r], R[i, 3 * r + 1], R[i, 3 * r + 2]
+                        R[i, 3 * r] = a0 * s00 + a1 * s10 + a2 * s20
+                        R[i, 3 * r + 1] = a0 * s01 + a1 * s11 + a2 * s21
+                        R[i, 3 * r + 2] = a0 * s02 + a1 * s12 + a2 * s22
             for i in range(n_s):
+                if camera_of[i] != i:
+                    continue
                 ca_o, sa_o, ce_o, se_o, g_c, g_s = (trig[i, 0], trig[i, 1], trig[i, 2],
                                                     trig[i, 3], trig[i, 4], trig[i, 5])
                 cp = c_eta[b, k] * ca_o - s_eta[b, k] * sa_o  # camera azimuth eta + dz
                 sp = s_eta[b, k] * ca_o + c_eta[b, k] * sa_o
                 ct = c_eps[b, k] * ce_o - s_eps[b, k] * se_o  # camera pitch eps + dpx
                 st = s_eps[b, k] * ce_o + c_eps[b, k] * se_o
+                C[i, 0], C[i, 1], C[i, 2] = g_c * cp - g_s * st * sp, g_c * sp + g_s * st * cp, \
+                    -g_s * ct
+                C[i, 3], C[i, 4], C[i, 5] = -ct * sp, ct * cp, st
+                C[i, 6], C[i, 7], C[i, 8] = g_s * cp + g_c * st * sp, g_s * sp - g_c * st * cp, \
+                    g_c * ct
                 if k == 0:
                     target[i, 0], target[i, 1], target[i, 2] = -ct * sp, ct * cp, st
-                t0, t1, t2 = target[i, 0], target[i, 1], target[i, 2]
-                v0 = r00 * t0 + r10 * t1 + r20 * t2  # R_k^T target
-                v1 = r01 * t0 + r11 * t1 + r21 * t2
-                v2 = r02 * t0 + r12 * t1 + r22 * t2
-                u0 = ((g_c * cp - g_s * st * sp) * v0 + (g_c * sp + g_s * st * cp) * v1
-                      - g_s * ct * v2)
-                u1 = -ct * sp * v0 + ct * cp * v1 + st * v2
-                u2 = ((g_s * cp + g_c * st * sp) * v0 + (g_s * sp - g_c * st * cp) * v1
-                      + g_c * ct * v2)
+            x0 = z0 = 0.0
+            for i in range(n_s):
+                Ci, t = C[camera_of[i]], target[camera_of[i]]
+                Ri = R[attitude_of[i]]
+                v0 = Ri[0] * t[0] + Ri[3] * t[1] + Ri[6] * t[2]  # R_k^T target
+                v1 = Ri[1] * t[0] + Ri[4] * t[1] + Ri[7] * t[2]
+                v2 = Ri[2] * t[0] + Ri[5] * t[1] + Ri[8] * t[2]
+                u0 = Ci[0] * v0 + Ci[1] * v1 + Ci[2] * v2
+                u1 = Ci[3] * v0 + Ci[4] * v1 + Ci[5] * v2
+                u2 = Ci[6] * v0 + Ci[7] * v1 + Ci[8] * v2
                 x, z = k_x * u0 / u1, k_z * u2 / u1
-                if steps[i] != 0.0:
-                    x, z = (x - base[b, k, 0]) / steps[i], (z - base[b, k, 1]) / steps[i]
-                out[b, k, 0, columns[i]], out[b, k, 1, columns[i]] = x, z
+                if i == 0:
+                    x0, z0 = x, z
+                else:
+                    x, z = (x - x0) / steps[i], (z - z0) / steps[i]
+                out[b, k, 0, i], out[b, k, 1, i] = x, z
 
 
 @nb.njit(cache=True, nogil=True)

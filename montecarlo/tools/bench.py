@@ -10,11 +10,18 @@ metrics; the runner paths include the streaming statistics.
 reference (one block at a time, with streaming statistics), (c) the fused kernel on one core,
 (d) the fused kernel through the study runner on two cores (loky). Each figure is the median of
 ``repeats`` timed runs in this invocation, after one untimed warm-up.
+
+Seed 001 stabilisation beside them: trials of the base point of ``studies/stabilization.toml``
+(simulate a 60 s run at 100 Hz, estimate by RLS, rerun compensated) through the runner on two
+cores, (e) with the literal numpy functions (``reference=True``), (f) with the compiled
+kernels of :mod:`montecarlo.seed001.kernels`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import functools
 import os
 import statistics
 import subprocess
@@ -32,6 +39,7 @@ from montecarlo.engine.distributions import Streams
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
+from montecarlo.systems.stabilization import STABILIZATION, run_trials
 
 WORKLOAD = {
     "study": {"name": "bench", "system": "ground", "trials": 1, "seed": 1},
@@ -101,6 +109,28 @@ def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> float:
     """(d) trials per second through run_study on ``n_jobs`` loky workers."""
     study = _study(n)
     options = RunOptions(n_jobs=n_jobs, progress=False)  # no checkpoints: each run afresh
+    return _median_rate(lambda: run_study(study, options), n, repeats)
+
+
+STABILIZATION_WORKLOAD = {
+    "study": {"name": "bench-stabilization", "system": "stabilization", "trials": 1, "seed": 1},
+    "params": {"rock_amplitude_deg": 5.0, "duration_s": 60.0, "image_noise_px": 0.1,
+               "gyro_noise_deg_per_root_h": 0.01},
+}
+STABILIZATION_REFERENCE = dataclasses.replace(
+    STABILIZATION, run_trials=functools.partial(run_trials, reference=True))
+"""The stabilisation system on the literal numpy path, for comparison."""
+
+
+def stabilization_rate(n: int, repeats: int, reference: bool, duration: float = 60.0
+                       ) -> float:
+    """(e), (f): stabilisation trials per second through run_study on the loky workers."""
+    raw = {**STABILIZATION_WORKLOAD, "study": {**STABILIZATION_WORKLOAD["study"], "trials": n},
+           "params": {**STABILIZATION_WORKLOAD["params"], "duration_s": duration}}
+    study = study_from_dict(raw, "<bench>")
+    if reference:
+        study = dataclasses.replace(study, system=STABILIZATION_REFERENCE)
+    options = RunOptions(progress=False)
     return _median_rate(lambda: run_study(study, options), n, repeats)
 
 
@@ -179,6 +209,9 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     scaling = [{"trials": n, "trials_per_s": runner_rate(n, repeats)} for n in sizes]
     fast2 = scaling[-1]["trials_per_s"]
     memory = {n: study_memory(n) for n in (sizes[0], big)}
+    duration = 5.0 if quick else 60.0
+    stab_reference = stabilization_rate(8 if quick else 64, min(repeats, 2), True, duration)
+    stab_fast = stabilization_rate(64 if quick else 512, repeats, False, duration)
     return {
         "naive_trials_per_s": naive,
         "reference_trials_per_s": reference,
@@ -192,6 +225,10 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         "ratio_2core_to_naive": fast2 / naive,
         "ratio_1core_to_reference": fast1 / reference,
         "ratio_2core_to_1core": fast2 / fast1,
+        "stabilization_reference_trials_per_s": stab_reference,
+        "stabilization_fast_trials_per_s": stab_fast,
+        "stabilization_ratio": stab_fast / stab_reference,
+        "stabilization_duration_s": duration,
         "compile_seconds_cold_cache": compile_seconds(),
         "host_probe_atan2_per_s": [probe_before, host_probe()],
         "scaling": scaling,
@@ -223,6 +260,13 @@ def format_bench(r: dict[str, Any]) -> str:
         "host speed probe (numpy arctan2 per second, one core, before/after): "
         + " / ".join(f"{p / 1e6:.0f} M" for p in r["host_probe_atan2_per_s"])
         + " (a shared host's speed moves with its load; so do the rates above)",
+        "",
+        f"seed 001 stabilisation ({r['stabilization_duration_s']:.0f} s run at 100 Hz: "
+        "simulate, RLS estimate, compensated rerun), through the runner, 2 cores:",
+        f"{'(e) literal numpy reference':<46}{r['stabilization_reference_trials_per_s']:>14,.2f}"
+        " trials/s",
+        f"{'(f) compiled kernels':<46}{r['stabilization_fast_trials_per_s']:>14,.2f} trials/s",
+        f"(f)/(e) = {r['stabilization_ratio']:.1f}x",
         "",
         "scaling through the runner (2 cores):",
     ]
