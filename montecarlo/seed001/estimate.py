@@ -38,7 +38,7 @@ from scipy.spatial.transform import Rotation
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
 from montecarlo.seed001 import kernels
-from montecarlo.seed001.kinematics import camera_matrix
+from montecarlo.seed001.kinematics import camera_matrix, flat_batch
 from montecarlo.seed001.linear_model import drift_matrix, image_roll_rate, plane_rotation
 from montecarlo.seed001.simulate import Compensation, Record, Setup
 
@@ -207,8 +207,7 @@ class LosModel:
         else:
             spline = CubicSpline(t, gyro, axis=1)
             self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
-        self.eta, self.eps = np.asarray(eta, float), np.asarray(eps, float)
-        self.trig = [f(a) for a in (eta, eps) for f in (np.cos, np.sin)]
+        self.trig = [f(np.asarray(a, float)) for a in (eta, eps) for f in (np.cos, np.sin)]
         self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
         self.shape = np.shape(eta)
 
@@ -216,6 +215,7 @@ class LosModel:
         """Image of the target at parameters ``sets[0]`` (shape (S, B, 8)) and the difference
         quotients of the others, shape (B, N, 2, S)."""
         C_bg = mounting_matrix(0.0, sets[..., 1], sets[..., 2])  # seed 001, eq. (1), dgz = 0
+
         def first_equal(columns: tuple[int, ...]) -> NDArray[np.int64]:
             """For each set, 0 if its ``columns`` equal those of set 0, else its own index."""
             moved = np.any(sets[..., list(columns)] != sets[:1, ..., list(columns)], axis=(1, 2))
@@ -443,14 +443,11 @@ def estimate(
                                            forgetting=forgetting,
                                            walk_transition=walk_transition, walk_var=walk_var)
     else:
-        flat = [np.ascontiguousarray(np.broadcast_to(a, (*batch, *np.shape(a)[-k:])).reshape(
-            -1, *np.shape(a)[-k:])) for a, k in ((gyro, 2), (eta, 1), (eps, 1), (los_px, 2))]
-        model = LosModel(t, *flat[:3], camera)
-        walk = [np.ascontiguousarray(np.broadcast_to(a, (*batch, t.size, *tail)).reshape(
-            -1, t.size, *tail)) for a, tail in ((walk_transition, (2, 2)),
-                                                (0.0 if walk_var is None else walk_var, (2,)))]
-        cov_flat = np.ascontiguousarray(np.broadcast_to(prior_cov, (len(flat[0]),
-                                                                    *prior_cov.shape)))
+        model = LosModel(t, flat_batch(gyro, batch, (t.size, 3)), flat_batch(eta, batch, (t.size,)),
+                         flat_batch(eps, batch, (t.size,)), camera)
+        walk = (flat_batch(walk_transition, batch, (t.size, 2, 2)),
+                flat_batch(0.0 if walk_var is None else walk_var, batch, (t.size, 2)))
+        cov_flat = flat_batch(prior_cov, batch, prior_cov.shape)
 
         def predict(q):
             return model.predict(q.reshape(-1, n_par)).reshape(*batch, t.size, 2)
@@ -460,11 +457,10 @@ def estimate(
             return predicted.reshape(*batch, t.size, 2), rows.reshape(*batch, t.size, 2, n_par)
 
         def rls(rows, obs, prior_mean):
-            x, P = kernels.rls_pass(
-                np.ascontiguousarray(np.broadcast_to(rows, (*batch, t.size, 2, n_par))
-                                     ).reshape(-1, t.size, 2, n_par),
-                np.ascontiguousarray(obs).reshape(-1, t.size, 2), prior_mean.reshape(-1, n_par + 2),
-                cov_flat, image_noise**2, forgetting, *walk)
+            x, P = kernels.rls_pass(flat_batch(rows, batch, (t.size, 2, n_par)),
+                                    flat_batch(obs, batch, (t.size, 2)),
+                                    flat_batch(prior_mean, batch, (n_par + 2,)), cov_flat,
+                                    image_noise**2, forgetting, *walk)
             return x.reshape(*batch, n_par + 2), P.reshape(*batch, n_par + 2, n_par + 2)
 
     passes = 0

@@ -20,7 +20,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from montecarlo.geometry.camera import Camera
 from montecarlo.seed001 import kernels
-from montecarlo.seed001.kinematics import as_vector, stack_vector
+from montecarlo.seed001.kinematics import as_vector, flat_batch, stack_vector
 from montecarlo.seed001.simulate import Record
 
 FloatArray = NDArray[np.float64]
@@ -205,10 +205,11 @@ def drift_matrix(
     eta, eps = np.asarray(eta, float), np.asarray(eps, float)
     k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
     if not reference and rate_matrix is None:
-        shape = np.broadcast_shapes(gyro.shape[:-1], eta.shape, eps.shape)
-        flat = [np.ascontiguousarray(np.broadcast_to(a, (*shape, *tail))).reshape(-1, t.size, *tail)
-                for a, tail in ((gyro, (3,)), (eta, ()), (eps, ()))]
-        return kernels.drift_rows(t, *flat, float(k_x), float(k_z)).reshape(*shape, 2, 7)
+        batch = np.broadcast_shapes(gyro.shape[:-2], eta.shape[:-1], eps.shape[:-1])
+        return kernels.drift_rows(t, flat_batch(gyro, batch, (t.size, 3)),
+                                  flat_batch(eta, batch, (t.size,)),
+                                  flat_batch(eps, batch, (t.size,)), float(k_x),
+                                  float(k_z)).reshape(*batch, t.size, 2, 7)
     H = (rate_matrix or los_rate_matrix)(gyro, eta, eps)
     rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)

@@ -25,6 +25,7 @@ from montecarlo.seed001.kinematics import (
     as_vector,
     batch_shape,
     camera_matrix,
+    flat_batch,
     gimbal_rates,
     imu_matrix,
     matvec,
@@ -271,7 +272,7 @@ def simulate(
         omega_m = measured_rate(omega_b, delta_g[..., None, :], bias[..., None, :])  # eq. (1)
         omega_m = np.broadcast_to(omega_m, (*batch, t_half.size, 3))
     else:
-        flat = [np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail))).reshape(-1, *tail)
+        flat = [flat_batch(a, batch, tail)
                 for a, tail in ((rocking.amplitude, (3,)), (rocking.frequency, (3,)),
                                 (rocking.phase, (3,)), (imu_matrix(delta_g), (3, 3)),
                                 (bias, (3,)))]
@@ -298,7 +299,7 @@ def simulate(
         eta, eps = integrate_gimbal(t, stages, setup.aim_azimuth, setup.aim_pitch, offset_eta,
                                     offset_eps)
     else:
-        flat = [np.ascontiguousarray(np.broadcast_to(a, (*batch, *tail))).reshape(-1, *tail)
+        flat = [flat_batch(a, batch, tail)
                 for a, tail in ((omega_m, (t_half.size, 3)), (noise, (t.size, 3)),
                                 (C_gb, (3, 3)), (loop_bias, (3,)), (setup.aim_azimuth, ()),
                                 (setup.aim_pitch, ()), (offset_eta, ()), (offset_eps, ()))]

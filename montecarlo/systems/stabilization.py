@@ -172,7 +172,7 @@ STABILIZATION = ParamSystem(
         Metric("los_rms_ratio", "LOS error RMS after / before compensation", "1", 1.0),
         Metric("residual_rms", "image residual RMS", "px", 1.0),
     ),
-    seconds_per_trial=0.5,
+    seconds_per_trial=0.05,
     default_block_size=32,
     limits={"duration": (1.0, 3600.0), "rate": (1.0, 10000.0),
             "misalignment_min": (0.0, 10.0), "misalignment_max": (0.0, 10.0),

@@ -100,7 +100,7 @@ def _block_rate(n: int, repeats: int, fast: bool) -> float:
             if fast:
                 system.accumulate_block(p, streams, first, m, b, stats)
             else:
-                stats.add_block(b, *system.simulate_block(p, streams, first, m))
+                stats.add_block(b, *system.simulate_block(p, streams, first, m), m)
 
     return _median_rate(run, n, repeats)
 
