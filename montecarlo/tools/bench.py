@@ -14,7 +14,8 @@ reference (one block at a time, with streaming statistics), (c) the fused kernel
 Seed 001 stabilisation beside them: trials of the base point of ``studies/stabilization.toml``
 (simulate a 60 s run at 100 Hz, estimate by RLS, rerun compensated) through the runner on two
 cores, (e) with the literal numpy functions (``reference=True``), (f) with the compiled
-kernels of :mod:`montecarlo.seed001.kernels`.
+kernels of :mod:`montecarlo.seed001.kernels`; timed in alternation, median of
+``min(repeats, 3)`` runs each.
 """
 
 from __future__ import annotations
@@ -122,16 +123,29 @@ STABILIZATION_REFERENCE = dataclasses.replace(
 """The stabilisation system on the literal numpy path, for comparison."""
 
 
-def stabilization_rate(n: int, repeats: int, reference: bool, duration: float = 60.0
-                       ) -> float:
-    """(e), (f): stabilisation trials per second through run_study on the loky workers."""
-    raw = {**STABILIZATION_WORKLOAD, "study": {**STABILIZATION_WORKLOAD["study"], "trials": n},
-           "params": {**STABILIZATION_WORKLOAD["params"], "duration_s": duration}}
-    study = study_from_dict(raw, "<bench>")
-    if reference:
-        study = dataclasses.replace(study, system=STABILIZATION_REFERENCE)
-    options = RunOptions(progress=False)
-    return _median_rate(lambda: run_study(study, options), n, repeats)
+def stabilization_rates(n_reference: int, n_fast: int, repeats: int, duration: float = 60.0
+                        ) -> tuple[float, float]:
+    """(e), (f): stabilisation trials per second through run_study on the loky workers.
+
+    The two paths alternate (one warm-up each, then ``repeats`` timed pairs) so that a change
+    of the host's load between them does not enter their ratio.
+    """
+    runs = []
+    for n, system in ((n_reference, STABILIZATION_REFERENCE), (n_fast, STABILIZATION)):
+        raw = {**STABILIZATION_WORKLOAD,
+               "study": {**STABILIZATION_WORKLOAD["study"], "trials": n},
+               "params": {**STABILIZATION_WORKLOAD["params"], "duration_s": duration}}
+        study = dataclasses.replace(study_from_dict(raw, "<bench>"), system=system)
+        runs.append(functools.partial(run_study, study, RunOptions(progress=False)))
+    for run in runs:
+        run()  # warm-up: compilation, caches, worker pool
+    times: list[list[float]] = [[], []]
+    for _ in range(repeats):
+        for run, spent in zip(runs, times, strict=True):
+            t0 = time.perf_counter()
+            run()
+            spent.append(time.perf_counter() - t0)
+    return n_reference / statistics.median(times[0]), n_fast / statistics.median(times[1])
 
 
 def study_memory(trials: int) -> dict[str, float]:
@@ -210,8 +224,8 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     fast2 = scaling[-1]["trials_per_s"]
     memory = {n: study_memory(n) for n in (sizes[0], big)}
     duration = 5.0 if quick else 60.0
-    stab_reference = stabilization_rate(8 if quick else 64, min(repeats, 2), True, duration)
-    stab_fast = stabilization_rate(64 if quick else 512, repeats, False, duration)
+    stab_reference, stab_fast = stabilization_rates(8 if quick else 64, 64 if quick else 256,
+                                                    min(repeats, 3), duration)
     return {
         "naive_trials_per_s": naive,
         "reference_trials_per_s": reference,
