@@ -205,6 +205,19 @@ def test_rls_pass_equals_recursive_least_squares(forgetting):
                                atol=1e-10)
 
 
+def test_walk_transition_equals_the_numpy_turn():
+    """F_k = J_k J_{k-1}^-1 by formula against LAPACK's inverse, on turning and scaling J."""
+    n = 300
+    J = RNG.normal(0, 1, (N_RUNS, n, 2, 2)) + 3 * np.eye(2)
+    expected = J @ np.linalg.inv(np.concatenate([J[:, :1], J[:, :-1]], axis=1))
+    got = kernels.walk_transition(J)
+    np.testing.assert_allclose(got[:, 0], np.broadcast_to(np.eye(2), (N_RUNS, 2, 2)), rtol=0,
+                               atol=4 * EPS)
+    cond = np.linalg.cond(np.concatenate([J[:, :1], J[:, :-1]], axis=1))
+    bound = 8 * EPS * cond[..., None, None] * np.abs(expected).max(axis=(-2, -1))[..., None, None]
+    assert np.all(np.abs(got - expected) <= bound)
+
+
 def test_estimate_equals_the_reference_path_within_its_own_rounding(case):
     """The whole estimate against reference=True. The literal path moves by itself when its
     input changes by one ulp (forward differences with 1e-9 steps of the bias): the compiled

@@ -572,7 +572,10 @@ def estimate(
             return predicted, los_jacobian(t, gyro, eta, eps, q, camera, predicted, a,
                                            columns=columns, **kw)
 
-        def rls(rows, obs, prior_mean, transition):
+        def rls(rows, obs, prior_mean):
+            J = rows[..., n_par:]
+            transition = J @ np.linalg.inv(np.concatenate([J[..., :1, :, :], J[..., :-1, :, :]],
+                                                          axis=-3))
             return recursive_least_squares(rows, obs, prior_mean, prior_cov, image_noise**2,
                                            forgetting=forgetting, walk_transition=transition,
                                            walk_var=walk_var)
@@ -592,13 +595,13 @@ def estimate(
             return (predicted.reshape(*batch, n_t, 2),
                     rows.reshape(*batch, n_t, 2, rows.shape[-1]))
 
-        def rls(rows, obs, prior_mean, transition):
+        def rls(rows, obs, prior_mean):
             p = rows.shape[-1]
-            x, P = kernels.rls_pass(flat_batch(rows, batch, (n_t, 2, p)),
-                                    flat_batch(obs, batch, (n_t, 2)),
+            rows = flat_batch(rows, batch, (n_t, 2, p))
+            transition = kernels.walk_transition(np.ascontiguousarray(rows[..., n_par:]))
+            x, P = kernels.rls_pass(rows, flat_batch(obs, batch, (n_t, 2)),
                                     flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
-                                    image_noise**2, forgetting,
-                                    flat_batch(transition, batch, (n_t, 2, 2)), walk_flat)
+                                    image_noise**2, forgetting, transition, walk_flat)
             return x.reshape(*batch, p + 2), P.reshape(*batch, p + 2, p + 2)
 
     passes = 0
@@ -609,11 +612,8 @@ def estimate(
                                    aim_rows], axis=-1)
         else:
             predicted, rows = predict_and_jacobian(params, aim, "all")
-        J = rows[..., n_par:]
-        transition = J @ np.linalg.inv(np.concatenate([J[..., :1, :, :], J[..., :-1, :, :]],
-                                                      axis=-3))
-        prior_mean = np.concatenate([-params, np.zeros((*batch, 4))], axis=-1)
-        x, P = rls(rows, los_px - predicted, prior_mean, transition)
+        x, P = rls(rows, los_px - predicted,
+                   np.concatenate([-params, np.zeros((*batch, 4))], axis=-1))
         params = params + x[..., :n_par]
         aim = aim + x[..., n_par:n_par + 2]
         cov = P[..., :n_par, :n_par]

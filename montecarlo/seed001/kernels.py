@@ -14,7 +14,8 @@ and is tested equal to it to about 1e-12 on the same inputs:
   :func:`montecarlo.seed001.simulate.simulate`);
 * :func:`drift_rows` - the first-order drift model integrated over time
   (:func:`montecarlo.seed001.linear_model.drift_matrix`);
-* :func:`rls_pass` - one pass of :func:`montecarlo.seed001.estimate.recursive_least_squares`;
+* :func:`rls_pass` - one pass of :func:`montecarlo.seed001.estimate.recursive_least_squares`,
+  and :func:`walk_transition` - the turn of its random walk;
 * :func:`rk4_gimbal` - :func:`montecarlo.seed001.simulate.integrate_gimbal`.
 
 Arrays have one batch axis (trials) first; callers flatten theirs. Per-step matrices are kept in
@@ -437,6 +438,39 @@ def rls_pass(rows, obs, prior_mean, prior_cov, noise_var, forgetting, walk_trans
                     P[i, j] = v
                     P[j, i] = v
     return X, Ps
+
+
+@nb.njit(cache=True, nogil=True)
+def walk_transition(J):  # pragma: no cover - compiled
+    """``F_k = J_k J_{k-1}^-1`` (``F_0 = I``), the turn of the LOS walk in
+    :func:`montecarlo.seed001.estimate.estimate`; the 2 x 2 inverse by formula.
+
+    Parameters
+    ----------
+    J : ndarray, shape (B, N, 2, 2) [px per px]
+        The aim point's Jacobian at each sample.
+
+    Returns
+    -------
+    ndarray, shape (B, N, 2, 2)
+
+    References
+    ----------
+    seed 001, claim 1, third step (the state's random walk).
+    """
+    n_b, n = J.shape[0], J.shape[1]
+    F = np.empty((n_b, n, 2, 2))
+    for b in range(n_b):
+        for k in range(n):
+            j = k - 1 if k > 0 else 0
+            a, c, d, e = J[b, j, 0, 0], J[b, j, 0, 1], J[b, j, 1, 0], J[b, j, 1, 1]
+            det = a * e - c * d
+            i00, i01, i10, i11 = e / det, -c / det, -d / det, a / det
+            for r in range(2):
+                x, y = J[b, k, r, 0], J[b, k, r, 1]
+                F[b, k, r, 0] = x * i00 + y * i10
+                F[b, k, r, 1] = x * i01 + y * i11
+    return F
 
 
 @nb.njit(cache=True, nogil=True)
