@@ -336,9 +336,11 @@ def simulate(
     compensation : Compensation or None
         Corrections applied by the stabilisation loop (None: none).
     reference : bool
-        Integrate the gimbal by the literal :func:`integrate_gimbal` and turn the target into
-        the camera with numpy instead of :func:`kernels.rk4_gimbal` and
-        :func:`target_view_compiled` (same results to about 1e-13).
+        Compute the IMU output, integrate the gimbal and turn the target into the camera with
+        the literal numpy functions instead of :func:`kernels.rocking_gyro`,
+        :func:`kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results to
+        rounding). The compiled image covers the patent mount with the target at the centre at
+        ``t = 0``; other set-ups use the numpy camera chain either way.
 
     Returns
     -------
