@@ -37,7 +37,13 @@ from scipy.spatial.transform import Rotation
 
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
-from montecarlo.seed001.kinematics import camera_matrix, check_mount
+from montecarlo.seed001 import kernels
+from montecarlo.seed001.kinematics import (
+    camera_matrix,
+    check_mount,
+    flat_batch,
+    installation_matrix,
+)
 from montecarlo.seed001.linear_model import drift_matrix
 from montecarlo.seed001.simulate import (
     Compensation,
@@ -88,6 +94,14 @@ def rate_spline(t: ArrayLike, omega: ArrayLike, sampling: str = "point"):
     step = np.diff(edges)[:, None] * omega
     angle = np.concatenate([np.zeros_like(step[..., :1, :]), np.cumsum(step, axis=-2)], axis=-2)
     return CubicSpline(edges, angle, axis=axis).derivative()
+
+
+def gauss_points(t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """The two Gauss points ``t_mid -/+ h sqrt(3)/6`` of each step of ``t`` [s]."""
+    t = np.asarray(t, float)
+    h = np.diff(t)
+    mid, half = t[:-1] + 0.5 * h, h * np.sqrt(3.0) / 6.0
+    return mid - half, mid + half
 
 
 def carrier_attitude(t: ArrayLike, omega: ArrayLike, sampling: str = "point") -> FloatArray:
@@ -242,6 +256,103 @@ def los_jacobian(
     return np.stack(out, axis=-1)
 
 
+class LosModel:
+    """:func:`predict_los` and :func:`los_jacobian` of one batch of runs, compiled.
+
+    The gyro output is splined once (:func:`rate_spline` is linear, so the rate of any
+    parameters is the same affine map of the splined gyro output, applied by
+    :func:`kernels.predicted_pixels`; :func:`kernels.spline_at` for point samples, scipy for
+    interval means) and the cosines and sines of the gimbal angles are taken once. The
+    prediction and the forward differences of the Jacobian are one kernel call; sets that share
+    the base's attitude or camera share their computation.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,) [s]
+    gyro : array_like, shape (B, N, 3) [rad/s]
+    eta, eps : array_like, shape (B, N) [rad]
+    camera : Camera
+    mount : {"patent", "inner-gimbal"}
+    gyro_sampling : {"point", "interval-mean"}
+    """
+
+    ATTITUDE = (1, 2, 5, 6, 7)
+    """Parameters that turn the carrier's attitude rebuilt from the gyro output."""
+
+    def __init__(self, t: ArrayLike, gyro: ArrayLike, eta: ArrayLike, eps: ArrayLike,
+                 camera: Camera, mount: str = "patent", gyro_sampling: str = "point") -> None:
+        t = np.asarray(t, float)
+        gyro = np.ascontiguousarray(gyro, float)
+        self.h = np.diff(t)
+        if check_sampling(gyro_sampling) == "point" and t.size >= 4:
+            self.w1, self.w2 = kernels.spline_at(t, gyro, *gauss_points(t))
+        else:
+            spline = rate_spline(t, gyro, gyro_sampling)
+            self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
+        self.trig = [f(np.asarray(a, float)) for a in (eta, eps) for f in (np.cos, np.sin)]
+        self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
+        self.shape = np.shape(eta)
+        self.inner = check_mount(mount) == "inner-gimbal"
+        self.camera_columns = (0, 3, 4, 8) if self.inner else (0, 3, 4)
+
+    def _pixels(self, sets: FloatArray, aims: FloatArray, steps: ArrayLike = (0.0,)
+                ) -> FloatArray:
+        """Image of the target at parameters ``sets[0]`` (shape (S, B, n)) and aim point
+        ``aims[0]`` (shape (S, B, 2)), and the difference quotients of the other sets, shape
+        (B, N, 2, S)."""
+        C_bg = mounting_matrix(0.0, sets[..., 1], sets[..., 2])  # seed 001, eq. (1), dgz = 0
+        zero = np.zeros(sets.shape[:-1])
+        if self.inner:  # camera_matrix(eta - dgz, eps, [dpx, dpy, delta_z + dgz], inner)
+            install = installation_matrix(np.stack(
+                [sets[..., 0], sets[..., 4], sets[..., 3] + sets[..., 8]], axis=-1))
+            offsets = np.stack([-sets[..., 8], zero], axis=-1)
+        else:  # camera_matrix(eta, eps, [dpx, dpy, delta_z]), seed 001, eq. (2)
+            install = mounting_matrix(0.0, 0.0, sets[..., 4])
+            offsets = np.stack([sets[..., 3], sets[..., 0]], axis=-1)
+
+        def first_equal(columns: tuple[int, ...]) -> NDArray[np.int64]:
+            """For each set, 0 if its ``columns`` equal those of set 0, else its own index."""
+            moved = np.any(sets[..., list(columns)] != sets[:1, ..., list(columns)], axis=(1, 2))
+            return np.where(moved, np.arange(len(sets)), 0)
+
+        out = np.empty((*self.shape, 2, len(sets)))
+        kernels.predicted_pixels(self.h, self.w1, self.w2,
+                                 np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
+                                 np.ascontiguousarray(sets[..., 5:8]),
+                                 first_equal(self.ATTITUDE), *self.trig,
+                                 np.ascontiguousarray(install), np.ascontiguousarray(offsets),
+                                 first_equal(self.camera_columns), np.ascontiguousarray(aims),
+                                 self.k_x, self.k_z, np.asarray(steps, float), out)
+        return out
+
+    def predict(self, params: ArrayLike, aim_px: ArrayLike) -> FloatArray:
+        """:func:`predict_los` at ``params`` (shape (B, n)) and ``aim_px`` (shape (B, 2)),
+        shape (B, N, 2) [px]."""
+        return self._pixels(np.asarray(params, float)[None], np.asarray(aim_px, float)[None])[
+            ..., 0]
+
+    def predict_and_jacobian(self, params: ArrayLike, aim_px: ArrayLike, columns: str = "all"
+                             ) -> tuple[FloatArray, FloatArray]:
+        """:func:`predict_los` and :func:`los_jacobian` (its ``columns``) at ``params`` and
+        ``aim_px``, shapes (B, N, 2) and (B, N, 2, n + 2), (B, N, 2, n) or (B, N, 2, 2)."""
+        p = np.asarray(params, float)
+        aim = np.asarray(aim_px, float)
+        steps = [0.0]
+        if columns in ("all", "params"):
+            steps += list(JACOBIAN_STEP) + [1e-6] * (p.shape[-1] - JACOBIAN_STEP.size)
+        n_moved = len(steps) - 1
+        if columns in ("all", "aim"):
+            steps += [AIM_STEP] * 2
+        sets = np.repeat(p[None], len(steps), axis=0)
+        aims = np.repeat(aim[None], len(steps), axis=0)
+        for j in range(n_moved):
+            sets[1 + j, :, j] += steps[1 + j]
+        for j in range(len(steps) - 1 - n_moved):
+            aims[1 + n_moved + j, :, j] += AIM_STEP
+        out = self._pixels(sets, aims, steps)
+        return out[..., 0], out[..., 1:]
+
+
 def recursive_least_squares(
     rows: ArrayLike,
     obs: ArrayLike,
@@ -381,6 +492,7 @@ def estimate(
     forgetting: float = 1.0,
     max_passes: int = 10,
     tol: float = 1e-2,
+    reference: bool = False,
 ) -> Estimate:
     """Estimate installation angles, gyro biases and the aim point from a run (or a batch).
 
@@ -415,6 +527,10 @@ def estimate(
         (:func:`los_jacobian`).
     tol : float
         Convergence: every parameter moved by less than ``tol`` standard deviations.
+    reference : bool
+        Run the literal numpy functions (:func:`predict_los`, :func:`los_jacobian`,
+        :func:`recursive_least_squares`) instead of :class:`LosModel` and
+        :func:`kernels.rls_pass` (the same results to rounding, many times slower).
 
     Returns
     -------
@@ -427,7 +543,8 @@ def estimate(
     names = parameter_names(mount)
     n_par = len(names)
     kw = {"mount": mount, "gyro_sampling": gyro_sampling}
-    model = drift_matrix(t, gyro, eta, eps, camera, mount=mount)  # first order about zero
+    model = drift_matrix(t, gyro, eta, eps, camera, mount=mount,
+                         reference=reference)  # first order about zero
     n_x = model.shape[-1] - 3
     first_rows = np.zeros((*model.shape[:-1], n_par))
     first_rows[..., :4] = model[..., :4]
@@ -446,23 +563,57 @@ def estimate(
     aim = np.array(np.broadcast_to(los_px[..., 0, :], (*batch, 2)))
     converged = np.zeros(batch, bool)
     cov = np.broadcast_to(prior_cov[:n_par, :n_par], (*batch, n_par, n_par))
+    if reference:
+        def predict(q, a):
+            return predict_los(t, gyro, eta, eps, q, camera, a, **kw)
+
+        def predict_and_jacobian(q, a, columns):
+            predicted = predict(q, a)
+            return predicted, los_jacobian(t, gyro, eta, eps, q, camera, predicted, a,
+                                           columns=columns, **kw)
+
+        def rls(rows, obs, prior_mean):
+            J = rows[..., n_par:]
+            transition = J @ np.linalg.inv(np.concatenate([J[..., :1, :, :], J[..., :-1, :, :]],
+                                                          axis=-3))
+            return recursive_least_squares(rows, obs, prior_mean, prior_cov, image_noise**2,
+                                           forgetting=forgetting, walk_transition=transition,
+                                           walk_var=walk_var)
+    else:
+        n_t = t.size
+        model = LosModel(t, flat_batch(gyro, batch, (n_t, 3)), flat_batch(eta, batch, (n_t,)),
+                         flat_batch(eps, batch, (n_t,)), camera, **kw)
+        walk_flat = flat_batch(0.0 if walk_var is None else walk_var, batch, (n_t, 2))
+        cov_flat = flat_batch(prior_cov, batch, prior_cov.shape)
+
+        def predict(q, a):
+            return model.predict(q.reshape(-1, n_par), a.reshape(-1, 2)).reshape(*batch, n_t, 2)
+
+        def predict_and_jacobian(q, a, columns):
+            predicted, rows = model.predict_and_jacobian(q.reshape(-1, n_par), a.reshape(-1, 2),
+                                                         columns)
+            return (predicted.reshape(*batch, n_t, 2),
+                    rows.reshape(*batch, n_t, 2, rows.shape[-1]))
+
+        def rls(rows, obs, prior_mean):
+            p = rows.shape[-1]
+            rows = flat_batch(rows, batch, (n_t, 2, p))
+            transition = kernels.walk_transition(np.ascontiguousarray(rows[..., n_par:]))
+            x, P = kernels.rls_pass(rows, flat_batch(obs, batch, (n_t, 2)),
+                                    flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
+                                    image_noise**2, forgetting, transition, walk_flat)
+            return x.reshape(*batch, p + 2), P.reshape(*batch, p + 2, p + 2)
+
     passes = 0
     for passes in range(1, max_passes + 1):
-        predicted = predict_los(t, gyro, eta, eps, params, camera, aim, **kw)
         if passes == 1:
-            aim_rows = los_jacobian(t, gyro, eta, eps, params, camera, predicted, aim,
-                                    columns="aim", **kw)
+            predicted, aim_rows = predict_and_jacobian(params, aim, "aim")
             rows = np.concatenate([np.broadcast_to(first_rows, (*batch, *first_rows.shape[-3:])),
                                    aim_rows], axis=-1)
         else:
-            rows = los_jacobian(t, gyro, eta, eps, params, camera, predicted, aim, **kw)
-        J = rows[..., n_par:]
-        transition = J @ np.linalg.inv(np.concatenate([J[..., :1, :, :], J[..., :-1, :, :]],
-                                                      axis=-3))
-        prior_mean = np.concatenate([-params, np.zeros((*batch, 4))], axis=-1)
-        x, P = recursive_least_squares(rows, los_px - predicted, prior_mean, prior_cov,
-                                       image_noise**2, forgetting=forgetting,
-                                       walk_transition=transition, walk_var=walk_var)
+            predicted, rows = predict_and_jacobian(params, aim, "all")
+        x, P = rls(rows, los_px - predicted,
+                   np.concatenate([-params, np.zeros((*batch, 4))], axis=-1))
         params = params + x[..., :n_par]
         aim = aim + x[..., n_par:n_par + 2]
         cov = P[..., :n_par, :n_par]
@@ -471,7 +622,7 @@ def estimate(
         converged = np.all(step < tol, axis=-1)
         if np.all(converged):
             break
-    residual = los_px - predict_los(t, gyro, eta, eps, params, camera, aim, **kw)
+    residual = los_px - predict(params, aim)
     rms = np.sqrt(np.mean(residual**2, axis=(-2, -1)))
     return Estimate(values=params, covariance=cov, passes=passes, converged=converged,
                     residual_rms=rms, aim_px=aim, mount=mount)

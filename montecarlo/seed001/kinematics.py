@@ -71,6 +71,13 @@ def batch_shape(*vectors: ArrayLike) -> tuple[int, ...]:
     return np.broadcast_shapes(*(np.shape(v)[:-1] for v in vectors if np.ndim(v) > 0))
 
 
+def flat_batch(x: ArrayLike, batch: tuple[int, ...], tail: tuple[int, ...]) -> FloatArray:
+    """``x`` broadcast to ``(*batch, *tail)`` as a C-contiguous array of shape ``(-1, *tail)``
+    (one batch axis, as the compiled kernels take it)."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(x, float), (*batch, *tail))).reshape(
+        -1, *tail)
+
+
 def matvec(M: ArrayLike, v: ArrayLike) -> FloatArray:
     return np.matmul(M, np.asarray(v, float)[..., None])[..., 0]
 

@@ -19,7 +19,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
 from montecarlo.geometry.camera import Camera
-from montecarlo.seed001.kinematics import as_vector, check_mount, stack_vector
+from montecarlo.seed001 import kernels
+from montecarlo.seed001.kinematics import as_vector, check_mount, flat_batch, stack_vector
 from montecarlo.seed001.simulate import Record
 
 FloatArray = NDArray[np.float64]
@@ -198,6 +199,7 @@ def drift_matrix(
     camera: Camera,
     rate_matrix=None,
     mount: str = "patent",
+    reference: bool = False,
 ) -> FloatArray:
     """First-order image drift of the target per unit parameter, from the rate model.
 
@@ -218,6 +220,9 @@ def drift_matrix(
         ``H(omega, eta, eps)`` of the rate model; :func:`los_rate_matrix` of ``mount`` if
         omitted (:func:`patent_eq6_matrix` to see what the printed model would give).
     mount : {"patent", "inner-gimbal"}
+    reference : bool
+        Compute with numpy and scipy instead of :func:`kernels.drift_rows` (same result to
+        rounding; always so with a ``rate_matrix`` or the inner-gimbal mount).
 
     Returns
     -------
@@ -227,12 +232,18 @@ def drift_matrix(
     t = np.asarray(t, float)
     gyro = np.asarray(gyro, float)
     eta, eps = np.asarray(eta, float), np.asarray(eps, float)
+    k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
+    if not reference and rate_matrix is None and check_mount(mount) == "patent":
+        batch = np.broadcast_shapes(gyro.shape[:-2], eta.shape[:-1], eps.shape[:-1])
+        return kernels.drift_rows(t, flat_batch(gyro, batch, (t.size, 3)),
+                                  flat_batch(eta, batch, (t.size,)),
+                                  flat_batch(eps, batch, (t.size,)), float(k_x),
+                                  float(k_z)).reshape(*batch, t.size, 2, 7)
     H = rate_matrix(gyro, eta, eps) if rate_matrix else los_rate_matrix(gyro, eta, eps, mount)
     rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
     integrand = np.matmul(plane_rotation(-rho), rate)
     phi = np.matmul(plane_rotation(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
-    k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
     return np.stack([k_x * phi[..., 1, :], -k_z * phi[..., 0, :]], axis=-2)
 
 

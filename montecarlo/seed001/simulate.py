@@ -19,13 +19,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed001 import kernels
 from montecarlo.seed001.kinematics import (
     Rocking,
     as_vector,
     batch_shape,
     camera_matrix,
     check_mount,
+    flat_batch,
     gimbal_rates,
+    imu_matrix,
     matvec,
     measured_rate,
 )
@@ -261,6 +264,44 @@ def integrate_gimbal(
     return eta, eps
 
 
+def target_view_compiled(
+    rocking_angles: ArrayLike, eta: ArrayLike, eps: ArrayLike, delta_p: ArrayLike
+) -> FloatArray:
+    """Direction in the camera of the target the LOS aimed at at ``t[0]``, compiled.
+
+    ``u_k = C_b^c(k) C_n^b(k) target`` with ``target`` row y of ``C_n^c(0)``, as in
+    :func:`simulate`.
+
+    Parameters
+    ----------
+    rocking_angles : array_like, shape (..., N, 3) [rad]
+        Carrier angles ``[psi, theta, gamma]`` (:meth:`Rocking.angles`).
+    eta, eps : array_like, shape (..., N) [rad]
+    delta_p : array_like, shape (..., 3) [rad]
+
+    Returns
+    -------
+    ndarray, shape (..., N, 3)
+
+    References
+    ----------
+    seed 001, eq. (2).
+    """
+    rocking_angles, eta, eps = (np.asarray(a, float) for a in (rocking_angles, eta, eps))
+    delta_p = as_vector(delta_p)
+    shape = np.broadcast_shapes(rocking_angles.shape[:-1], eta.shape, eps.shape,
+                                (*delta_p.shape[:-1], 1))
+    angles = [rocking_angles[..., i] for i in range(3)] + [
+        eta + delta_p[..., 2, None], eps + delta_p[..., 0, None], delta_p[..., 1, None]]
+    trig = np.empty((12, *shape))
+    for i, a in enumerate(angles):  # numpy's cosines and sines are vectorised
+        trig[2 * i], trig[2 * i + 1] = np.cos(a), np.sin(a)
+    trig = trig.reshape(12, -1, shape[-1])
+    u = np.empty((*trig.shape[1:], 3))
+    kernels.target_directions(trig[:6], trig[6:], u)  # seed 001, eq. (2)
+    return u.reshape(*shape, 3)
+
+
 def simulate(
     rocking: Rocking,
     setup: Setup,
@@ -269,6 +310,7 @@ def simulate(
     gyro_bias: ArrayLike = 0.0,
     rng: int | np.random.Generator | None = None,
     compensation: Compensation | None = None,
+    reference: bool = False,
 ) -> Record:
     """Simulate one run (or a batch of runs) with the exact kinematics.
 
@@ -293,6 +335,12 @@ def simulate(
         Source of gyro and image noise.
     compensation : Compensation or None
         Corrections applied by the stabilisation loop (None: none).
+    reference : bool
+        Compute the IMU output, integrate the gimbal and turn the target into the camera with
+        the literal numpy functions instead of :func:`kernels.rocking_gyro`,
+        :func:`kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results to
+        rounding). The compiled image covers the patent mount with the target at the centre at
+        ``t = 0``; other set-ups use the numpy camera chain either way.
 
     Returns
     -------
@@ -312,44 +360,66 @@ def simulate(
 
     # noise-free IMU output at the sample times and at the mid-points of the Runge-Kutta steps
     t_half = np.sort(np.concatenate([t, t[:-1] + 0.5 * h]))
-    omega_b = rocking.body_rate(t_half)
-    omega_m = measured_rate(omega_b, delta_g[..., None, :], bias[..., None, :])  # seed 001, (1)
-    omega_m = np.broadcast_to(omega_m, (*batch, t_half.size, 3))
+    if reference:
+        omega_b = rocking.body_rate(t_half)
+        omega_m = measured_rate(omega_b, delta_g[..., None, :], bias[..., None, :])  # eq. (1)
+        omega_m = np.broadcast_to(omega_m, (*batch, t_half.size, 3))
+    else:
+        flat = [flat_batch(a, batch, tail)
+                for a, tail in ((rocking.amplitude, (3,)), (rocking.frequency, (3,)),
+                                (rocking.phase, (3,)), (imu_matrix(delta_g), (3, 3)),
+                                (bias, (3,)))]
+        rock_angles, omega_m = (a.reshape(*batch, t_half.size, 3)
+                                for a in kernels.rocking_gyro(t_half, *flat))  # eq. (1)
     noise = setup.gyro_noise * np.sqrt(setup.rate) * rng.standard_normal((*batch, t.size, 3))
 
     # the rate the loop integrates: measured, or corrected by the compensation
     offset_eta = offset_eps = 0.0
-    loop_rate, loop_noise = omega_m, noise
+    C_gb, loop_bias = np.eye(3), np.zeros(3)
     if compensation is not None:
         angles = np.asarray(compensation.angles, float)
         C_gb = np.swapaxes(mounting_matrix(0.0, angles[..., 1], angles[..., 2]), -1, -2)
-        C_gb = C_gb[..., None, :, :]
-        loop_bias = as_vector(compensation.gyro_bias)[..., None, :]
-        loop_rate = matvec(C_gb, omega_m - loop_bias)
-        loop_noise = matvec(C_gb, noise)
+        loop_bias = as_vector(compensation.gyro_bias)
         offset_eta, offset_eps = angles[..., 3], angles[..., 0]
-    stages = np.stack([loop_rate[..., 0:-1:2, :], loop_rate[..., 1::2, :],
-                       loop_rate[..., 2::2, :]], axis=-2)
-    stages = stages + loop_noise[..., :-1, None, :]  # white noise held over each interval
-    if compensation is not None and compensation.mount == "inner-gimbal":
+    inner = compensation is not None and compensation.mount == "inner-gimbal"
+    if inner:
         dgz = np.asarray(compensation.delta_gz, float)
         start = pointing_angles(setup.aim_azimuth, setup.aim_pitch, angles, dgz)
-        eta_los, eps_los = integrate_gimbal(t, stages, *start)
-        eta, eps = encoder_angles(eta_los, eps_los, angles, dgz, setup.aim_azimuth)
     else:
-        eta, eps = integrate_gimbal(t, stages, setup.aim_azimuth, setup.aim_pitch,
-                                    offset_eta, offset_eps)
+        start = (setup.aim_azimuth, setup.aim_pitch, offset_eta, offset_eps)
+    if reference:
+        loop_rate, loop_noise = omega_m, noise
+        if compensation is not None:
+            loop_rate = matvec(C_gb[..., None, :, :], omega_m - loop_bias[..., None, :])
+            loop_noise = matvec(C_gb[..., None, :, :], noise)
+        stages = np.stack([loop_rate[..., 0:-1:2, :], loop_rate[..., 1::2, :],
+                           loop_rate[..., 2::2, :]], axis=-2)
+        stages = stages + loop_noise[..., :-1, None, :]  # white noise held over each interval
+        eta, eps = integrate_gimbal(t, stages, *start)
+    else:
+        start = (*start, 0.0, 0.0)[:4]
+        flat = [flat_batch(a, batch, tail)
+                for a, tail in ((omega_m, (t_half.size, 3)), (noise, (t.size, 3)),
+                                (C_gb, (3, 3)), (loop_bias, (3,)), (start[0], ()),
+                                (start[1], ()), (start[2], ()), (start[3], ()))]
+        eta, eps = (a.reshape(*batch, t.size)
+                    for a in kernels.rk4_gimbal(np.diff(t), *flat))  # seed 001, eq. (4)
+    if inner:
+        eta, eps = encoder_angles(eta, eps, angles, dgz, setup.aim_azimuth)
 
     # camera attitude, target and its image
-    C_nb = rocking.attitude(t)
-    C_nc = np.matmul(camera_matrix(eta, eps, delta_p[..., None, :], setup.mount),
-                     C_nb)  # seed 001, eq. (2)
-    target = target_direction(C_nc[..., 0, :, :], setup.target_px, setup.camera)
-    u = matvec(C_nc, target[..., None, :])
+    if reference or setup.mount != "patent" or np.any(setup.target_px):
+        C_nb = rocking.attitude(t)
+        C_nc = np.matmul(camera_matrix(eta, eps, delta_p[..., None, :], setup.mount),
+                         C_nb)  # seed 001, eq. (2)
+        target = target_direction(C_nc[..., 0, :, :], setup.target_px, setup.camera)
+        u = matvec(C_nc, target[..., None, :])
+        v = matvec(C_nc, C_nc[..., 0:1, 1, :])  # the LOS at t = 0 (row y of C_n^c) in frame c
+    else:  # patent mount, target at the centre at t = 0: the target is the LOS at t = 0
+        u = v = target_view_compiled(rock_angles[..., 0::2, :], eta, eps, delta_p)
     x_px, z_px = pixels_from_direction(u, setup.camera)
     los_true = np.stack([x_px, z_px], axis=-1)
     los = los_true + setup.image_noise * rng.standard_normal(los_true.shape)
-    v = matvec(C_nc, C_nc[..., 0:1, 1, :])  # the LOS at t = 0 (row y of C_n^c) in frame c
     los_error = np.arctan2(np.hypot(v[..., 0], v[..., 2]), v[..., 1])
     if setup.gyro_sampling == "point":
         gyro = omega_m[..., 0::2, :] + noise

@@ -57,7 +57,8 @@ process at 60 s and 100 Hz)."""
 
 
 def run_trials(
-    params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
+    params: Mapping[str, float | int | str], rng: np.random.Generator, n: int,
+    reference: bool = False,
 ) -> dict[str, FloatArray]:
     """Simulate, estimate and compensate ``n`` independent calibration runs.
 
@@ -89,6 +90,9 @@ def run_trials(
         The only source of randomness.
     n : int
         Number of trials.
+    reference : bool
+        Simulate and estimate with the literal numpy functions instead of the compiled kernels
+        of :mod:`montecarlo.seed001.kernels` (the same results to rounding, many times slower).
 
     Returns
     -------
@@ -130,11 +134,11 @@ def run_trials(
         rocking = Rocking(np.full(3, p["rock_amplitude"]), frequency, phase[part])
         part_setup = dataclasses.replace(setup, target_px=target[part])
         run = sim.simulate(rocking, part_setup, delta_g[part], delta_p[part], bias[part],
-                           sim_rng)
+                           sim_rng, reference=reference)
         est = estimate_record(run, part_setup, forgetting=p["forgetting"],
-                              max_passes=int(p["max_passes"]))
+                              max_passes=int(p["max_passes"]), reference=reference)
         rerun = sim.simulate(rocking, part_setup, delta_g[part], delta_p[part], bias[part],
-                              rerun_rng, compensation=est.compensation())
+                              rerun_rng, compensation=est.compensation(), reference=reference)
         chunks.append((est, run.los_error, rerun.los_error))
 
     values = np.concatenate([c[0].values for c in chunks])[:, [0, 1, 2, 3, ROLL]]
@@ -197,7 +201,7 @@ STABILIZATION = ParamSystem(
         Metric("residual_rms", "image residual RMS per axis", "px", 1.0),
         Metric("aim_error", "aim point error", "px", 1.0),
     ),
-    seconds_per_trial=0.5,
+    seconds_per_trial=0.05,
     default_block_size=32,
     limits={"duration": (1.0, 3600.0), "rate": (1.0, 10000.0),
             "misalignment_min": (0.0, 10.0), "misalignment_max": (0.0, 10.0),

@@ -10,11 +10,19 @@ metrics; the runner paths include the streaming statistics.
 reference (one block at a time, with streaming statistics), (c) the fused kernel on one core,
 (d) the fused kernel through the study runner on two cores (loky). Each figure is the median of
 ``repeats`` timed runs in this invocation, after one untimed warm-up.
+
+Seed 001 stabilisation beside them: trials of the base point of ``studies/stabilization.toml``
+(simulate a 60 s run at 100 Hz, estimate by RLS, rerun compensated) through the runner on two
+cores, (e) with the literal numpy functions (``reference=True``), (f) with the compiled
+kernels of :mod:`montecarlo.seed001.kernels`; timed in alternation, median of
+``min(repeats, 3)`` runs each.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import functools
 import os
 import statistics
 import subprocess
@@ -32,6 +40,7 @@ from montecarlo.engine.distributions import Streams
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
+from montecarlo.systems.stabilization import STABILIZATION, run_trials
 
 WORKLOAD = {
     "study": {"name": "bench", "system": "ground", "trials": 1, "seed": 1},
@@ -92,7 +101,7 @@ def _block_rate(n: int, repeats: int, fast: bool) -> float:
             if fast:
                 system.accumulate_block(p, streams, first, m, b, stats)
             else:
-                stats.add_block(b, *system.simulate_block(p, streams, first, m))
+                stats.add_block(b, *system.simulate_block(p, streams, first, m), m)
 
     return _median_rate(run, n, repeats)
 
@@ -102,6 +111,41 @@ def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> float:
     study = _study(n)
     options = RunOptions(n_jobs=n_jobs, progress=False)  # no checkpoints: each run afresh
     return _median_rate(lambda: run_study(study, options), n, repeats)
+
+
+STABILIZATION_WORKLOAD = {
+    "study": {"name": "bench-stabilization", "system": "stabilization", "trials": 1, "seed": 1},
+    "params": {"rock_amplitude_deg": 5.0, "duration_s": 60.0, "image_noise_px": 0.1,
+               "gyro_noise_deg_per_root_h": 0.01},
+}
+STABILIZATION_REFERENCE = dataclasses.replace(
+    STABILIZATION, run_trials=functools.partial(run_trials, reference=True))
+"""The stabilisation system on the literal numpy path, for comparison."""
+
+
+def stabilization_rates(n_reference: int, n_fast: int, repeats: int, duration: float = 60.0
+                        ) -> tuple[float, float]:
+    """(e), (f): stabilisation trials per second through run_study on the loky workers.
+
+    The two paths alternate (one warm-up each, then ``repeats`` timed pairs) so that a change
+    of the host's load between them does not enter their ratio.
+    """
+    runs = []
+    for n, system in ((n_reference, STABILIZATION_REFERENCE), (n_fast, STABILIZATION)):
+        raw = {**STABILIZATION_WORKLOAD,
+               "study": {**STABILIZATION_WORKLOAD["study"], "trials": n},
+               "params": {**STABILIZATION_WORKLOAD["params"], "duration_s": duration}}
+        study = dataclasses.replace(study_from_dict(raw, "<bench>"), system=system)
+        runs.append(functools.partial(run_study, study, RunOptions(progress=False)))
+    for run in runs:
+        run()  # warm-up: compilation, caches, worker pool
+    times: list[list[float]] = [[], []]
+    for _ in range(repeats):
+        for run, spent in zip(runs, times, strict=True):
+            t0 = time.perf_counter()
+            run()
+            spent.append(time.perf_counter() - t0)
+    return n_reference / statistics.median(times[0]), n_fast / statistics.median(times[1])
 
 
 def study_memory(trials: int) -> dict[str, float]:
@@ -179,6 +223,9 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     scaling = [{"trials": n, "trials_per_s": runner_rate(n, repeats)} for n in sizes]
     fast2 = scaling[-1]["trials_per_s"]
     memory = {n: study_memory(n) for n in (sizes[0], big)}
+    duration = 5.0 if quick else 60.0
+    stab_reference, stab_fast = stabilization_rates(8 if quick else 64, 64 if quick else 256,
+                                                    min(repeats, 3), duration)
     return {
         "naive_trials_per_s": naive,
         "reference_trials_per_s": reference,
@@ -192,6 +239,10 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         "ratio_2core_to_naive": fast2 / naive,
         "ratio_1core_to_reference": fast1 / reference,
         "ratio_2core_to_1core": fast2 / fast1,
+        "stabilization_reference_trials_per_s": stab_reference,
+        "stabilization_fast_trials_per_s": stab_fast,
+        "stabilization_ratio": stab_fast / stab_reference,
+        "stabilization_duration_s": duration,
         "compile_seconds_cold_cache": compile_seconds(),
         "host_probe_atan2_per_s": [probe_before, host_probe()],
         "scaling": scaling,
@@ -223,6 +274,13 @@ def format_bench(r: dict[str, Any]) -> str:
         "host speed probe (numpy arctan2 per second, one core, before/after): "
         + " / ".join(f"{p / 1e6:.0f} M" for p in r["host_probe_atan2_per_s"])
         + " (a shared host's speed moves with its load; so do the rates above)",
+        "",
+        f"seed 001 stabilisation ({r['stabilization_duration_s']:.0f} s run at 100 Hz: "
+        "simulate, RLS estimate, compensated rerun), through the runner, 2 cores:",
+        f"{'(e) literal numpy reference':<46}{r['stabilization_reference_trials_per_s']:>14,.2f}"
+        " trials/s",
+        f"{'(f) compiled kernels':<46}{r['stabilization_fast_trials_per_s']:>14,.2f} trials/s",
+        f"(f)/(e) = {r['stabilization_ratio']:.1f}x",
         "",
         "scaling through the runner (2 cores):",
     ]

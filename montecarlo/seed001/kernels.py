@@ -1,0 +1,602 @@
+"""Compiled building blocks of the seed 001 simulation and estimation (numba).
+
+Each kernel computes what a literal numpy function of :mod:`montecarlo.seed001.simulate` or
+:mod:`montecarlo.seed001.estimate` computes, in a loop over time instead of over whole arrays,
+and is tested equal to it to about 1e-12 on the same inputs:
+
+* :func:`spline_at` - the cubic spline of the gyro output at the Gauss points
+  (``scipy.interpolate.CubicSpline``);
+* :func:`predicted_pixels` - the image of the target predicted from the gyro output, the
+  carrier's attitude a prefix product of Magnus steps, for either camera mount and any aim
+  point (:func:`montecarlo.seed001.estimate.predict_los` after its spline);
+* :func:`rocking_gyro` - the carrier's rocking and the IMU output of the simulator;
+* :func:`target_directions` - the target's direction in the camera (the end of
+  :func:`montecarlo.seed001.simulate.simulate`);
+* :func:`drift_rows` - the first-order drift model integrated over time
+  (:func:`montecarlo.seed001.linear_model.drift_matrix`);
+* :func:`rls_pass` - one pass of :func:`montecarlo.seed001.estimate.recursive_least_squares`,
+  and :func:`walk_transition` - the turn of its random walk;
+* :func:`rk4_gimbal` - :func:`montecarlo.seed001.simulate.integrate_gimbal`.
+
+Arrays have one batch axis (trials) first; callers flatten theirs. Per-step matrices are kept in
+registers, never stored: arrays of them for a batch of runs take tens of MB, and touching fresh
+memory costs more than the arithmetic. No fastmath: the kernels keep IEEE arithmetic and differ
+from the numpy path only in the order of operations.
+
+References
+----------
+seed 001: patent CN102288133B, eqs. (1)-(4), claim 1 (third step).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+SERIES_ANGLE_SQ = 2.5e-3
+"""Below this squared step angle [rad^2] (0.05 rad) the quaternion of a rotation vector comes
+from its Taylor series (terms up to angle^8; the first omitted term is below 3e-23)."""
+
+
+@nb.njit(cache=True, nogil=True)
+def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
+    """Not-a-knot cubic spline of ``y(t)`` at two points inside each interval.
+
+    ``scipy.interpolate.CubicSpline(t, y, axis=1)`` evaluated at ``g1`` and ``g2``: the slopes
+    solve scipy's tridiagonal system (here by elimination without pivoting, for ``N >= 4``),
+    the piecewise polynomials are scipy's.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Increasing.
+    y : ndarray, shape (B, N, c)
+    g1, g2 : ndarray, shape (N - 1,)
+        Points of interval ``[t_k, t_{k+1}]``.
+
+    Returns
+    -------
+    ndarray, shape (B, N - 1, c), twice
+    """
+    n_b, n, n_c = y.shape[0], y.shape[1], y.shape[2]
+    dx = np.diff(t)
+    lower, diag, upper = np.empty(n), np.empty(n), np.empty(n)
+    diag[0], upper[0] = dx[1], t[2] - t[0]
+    for i in range(1, n - 1):
+        lower[i], diag[i], upper[i] = dx[i], 2 * (dx[i - 1] + dx[i]), dx[i - 1]
+    lower[n - 1], diag[n - 1] = t[n - 1] - t[n - 3], dx[n - 3]
+    d0, d1 = t[2] - t[0], t[n - 1] - t[n - 3]
+    slope, rhs, c_up, s = np.empty(n - 1), np.empty(n), np.empty(n), np.empty(n)
+    out1, out2 = np.empty((n_b, n - 1, n_c)), np.empty((n_b, n - 1, n_c))
+    for b in range(n_b):
+        for c in range(n_c):
+            for i in range(n - 1):
+                slope[i] = (y[b, i + 1, c] - y[b, i, c]) / dx[i]
+            rhs[0] = ((dx[0] + 2 * d0) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d0
+            for i in range(1, n - 1):
+                rhs[i] = 3 * (dx[i] * slope[i - 1] + dx[i - 1] * slope[i])
+            rhs[n - 1] = (dx[n - 2] ** 2 * slope[n - 3]
+                          + (2 * d1 + dx[n - 2]) * dx[n - 3] * slope[n - 2]) / d1
+            c_up[0] = upper[0] / diag[0]  # forward elimination
+            s[0] = rhs[0] / diag[0]
+            for i in range(1, n):
+                m = diag[i] - lower[i] * c_up[i - 1]
+                c_up[i] = upper[i] / m
+                s[i] = (rhs[i] - lower[i] * s[i - 1]) / m
+            for i in range(n - 2, -1, -1):  # back substitution
+                s[i] -= c_up[i] * s[i + 1]
+            for i in range(n - 1):
+                tt = (s[i] + s[i + 1] - 2 * slope[i]) / dx[i]
+                p0, p1, p2, p3 = tt / dx[i], (slope[i] - s[i]) / dx[i] - tt, s[i], y[b, i, c]
+                for g, out in ((g1[i], out1), (g2[i], out2)):
+                    z = g - t[i]
+                    out[b, i, c] = p3 + p2 * z + p1 * (z * z) + p0 * (z * z * z)
+    return out1, out2
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _magnus_step(h, w1, w2, T, bias):  # pragma: no cover - compiled
+    """Rotation matrix (9 entries, row by row) of one step of :func:`predicted_pixels`."""
+    u0, u1, u2 = w1[0] - bias[0], w1[1] - bias[1], w1[2] - bias[2]
+    x0 = T[0, 0] * u0 + T[0, 1] * u1 + T[0, 2] * u2
+    x1 = T[1, 0] * u0 + T[1, 1] * u1 + T[1, 2] * u2
+    x2 = T[2, 0] * u0 + T[2, 1] * u1 + T[2, 2] * u2
+    u0, u1, u2 = w2[0] - bias[0], w2[1] - bias[1], w2[2] - bias[2]
+    y0 = T[0, 0] * u0 + T[0, 1] * u1 + T[0, 2] * u2
+    y1 = T[1, 0] * u0 + T[1, 1] * u1 + T[1, 2] * u2
+    y2 = T[2, 0] * u0 + T[2, 1] * u1 + T[2, 2] * u2
+    hh, cc = 0.5 * h, np.sqrt(3.0) / 12.0 * (h * h)
+    vx = hh * (x0 + y0) + cc * (x1 * y2 - x2 * y1)
+    vy = hh * (x1 + y1) + cc * (x2 * y0 - x0 * y2)
+    vz = hh * (x2 + y2) + cc * (x0 * y1 - x1 * y0)
+    a2 = vx * vx + vy * vy + vz * vz
+    if a2 < SERIES_ANGLE_SQ:
+        scale = 0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 + a2 * (
+            -1.0 / 645120.0 + a2 / 185794560.0)))
+        qw = 1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 + a2 * (
+            -1.0 / 46080.0 + a2 / 10321920.0)))
+    else:
+        angle = np.sqrt(a2)
+        scale = np.sin(0.5 * angle) / angle
+        qw = np.cos(0.5 * angle)
+    qx, qy, qz = scale * vx, scale * vy, scale * vz
+    return (qx * qx - qy * qy - qz * qz + qw * qw, 2.0 * (qx * qy - qz * qw),
+            2.0 * (qx * qz + qy * qw), 2.0 * (qx * qy + qz * qw),
+            -qx * qx + qy * qy - qz * qz + qw * qw, 2.0 * (qy * qz - qx * qw),
+            2.0 * (qx * qz - qy * qw), 2.0 * (qy * qz + qx * qw),
+            -qx * qx - qy * qy + qz * qz + qw * qw)
+
+
+@nb.njit(cache=True, nogil=True)
+def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_eps, s_eps,
+                     installation, offsets, camera_of, aim, k_x, k_z, steps,
+                     out):  # pragma: no cover - compiled
+    """Image of a fixed target imaged at ``aim`` at ``t_0``, for several sets of parameters.
+
+    The carrier's attitude ``R_k = C_{b_k}^{b_0}`` is the prefix product of the steps'
+    rotations; each step turns by the fourth-order Magnus vector ``h/2 (r1 + r2) +
+    sqrt(3)/12 h^2 r1 x r2`` of the rate ``r = transform (w - bias)`` at its two Gauss points,
+    made a matrix through its quaternion (as ``scipy.spatial.transform.Rotation``). The camera
+    is ``C_k = M R_x(eps_k + o_eps) R_z(eta_k + o_eta)`` with ``M`` the set's installation
+    matrix and ``[o_eta, o_eps]`` its offsets (patent mount, eq. (2): ``M = R_y(dpy)``, offsets
+    ``[dz, dpx]``; inner-gimbal mount: ``M = R_y(dpy) R_x(dpx) R_z(dpz)``, offsets
+    ``[-dgz, 0]``). The target is ``C_0^T d`` with ``d`` the pinhole's direction of ``aim``,
+    its direction ``u_k = C_k R_k^T target`` and its image ``x = [k_x u_x / u_y,
+    k_z u_z / u_y]``. The sets' attitudes advance together, one step for all (independent
+    chains keep the processor busy).
+
+    Parameters
+    ----------
+    h : ndarray, shape (N - 1,) [s]
+        Step lengths.
+    w1, w2 : ndarray, shape (B, N - 1, 3) [rad/s]
+        Rate at ``t_mid -/+ h sqrt(3)/6`` of each step.
+    transform : ndarray, shape (S, B, 3, 3)
+    bias : ndarray, shape (S, B, 3) [rad/s]
+    attitude_of : ndarray of int, shape (S,)
+        Set whose attitude set ``s`` uses (``s`` itself, or an earlier set with the same
+        transform and bias).
+    c_eta, s_eta, c_eps, s_eps : ndarray, shape (B, N)
+        Cosines and sines of the gimbal angles (the camera's angles follow by the sum formulas).
+    installation : ndarray, shape (S, B, 3, 3)
+        ``M`` of each set.
+    offsets : ndarray, shape (S, B, 2) [rad]
+        ``[o_eta, o_eps]`` of each set.
+    camera_of : ndarray of int, shape (S,)
+        Set whose camera set ``s`` uses (``s`` itself, or an earlier set with the same
+        installation and offsets).
+    aim : ndarray, shape (S, B, 2) [px]
+        Image of the target at ``t_0``.
+    k_x, k_z : float [px]
+    steps : ndarray, shape (S,)
+        0 for set 0; else set ``s`` gives the forward difference ``(x_s - x_0) / step_s``.
+    out : ndarray, shape (B, N, 2, S)
+        Filled with the image of set 0 [px] and the differences of the others.
+
+    References
+    ----------
+    seed 001, eqs. (1)-(2).
+    """
+    n_s = offsets.shape[0]
+    trig = np.empty((n_s, 4))
+    target = np.empty((n_s, 3))
+    R = np.empty((n_s, 9))
+    C = np.empty((n_s, 9))
+    for b in range(out.shape[0]):
+        for i in range(n_s):
+            for j in range(2):
+                trig[i, 2 * j] = np.cos(offsets[i, b, j])
+                trig[i, 2 * j + 1] = np.sin(offsets[i, b, j])
+            for j in range(9):
+                R[i, j] = 1.0 if j % 4 == 0 else 0.0
+        for k in range(out.shape[1]):
+            if k > 0:
+                for i in range(n_s):
+                    if attitude_of[i] != i:
+                        continue
+                    s00, s01, s02, s10, s11, s12, s20, s21, s22 = _magnus_step(
+                        h[k - 1], w1[b, k - 1], w2[b, k - 1], transform[i, b], bias[i, b])
+                    for r in range(3):
+                        a0, a1, a2 = R[i, 3 * r], R[i, 3 * r + 1], R[i, 3 * r + 2]
+                        R[i, 3 * r] = a0 * s00 + a1 * s10 + a2 * s20
+                        R[i, 3 * r + 1] = a0 * s01 + a1 * s11 + a2 * s21
+                        R[i, 3 * r + 2] = a0 * s02 + a1 * s12 + a2 * s22
+            for i in range(n_s):
+                if camera_of[i] != i:
+                    continue
+                ca_o, sa_o, ce_o, se_o = trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3]
+                cp = c_eta[b, k] * ca_o - s_eta[b, k] * sa_o  # camera azimuth eta + o_eta
+                sp = s_eta[b, k] * ca_o + c_eta[b, k] * sa_o
+                ct = c_eps[b, k] * ce_o - s_eps[b, k] * se_o  # camera pitch eps + o_eps
+                st = s_eps[b, k] * ce_o + c_eps[b, k] * se_o
+                g0, g1, g2 = cp, sp, 0.0  # R_x(pitch) R_z(azimuth), row by row
+                g3, g4, g5 = -ct * sp, ct * cp, st
+                g6, g7, g8 = st * sp, -st * cp, ct
+                M = installation[i, b]
+                for r in range(3):
+                    m0, m1, m2 = M[r, 0], M[r, 1], M[r, 2]
+                    C[i, 3 * r] = m0 * g0 + m1 * g3 + m2 * g6
+                    C[i, 3 * r + 1] = m0 * g1 + m1 * g4 + m2 * g7
+                    C[i, 3 * r + 2] = m0 * g2 + m1 * g5 + m2 * g8
+            if k == 0:
+                for i in range(n_s):
+                    Ci = C[camera_of[i]]
+                    d0, d2 = aim[i, b, 0] / k_x, aim[i, b, 1] / k_z
+                    norm = np.sqrt(d0 * d0 + 1.0 + d2 * d2)
+                    d0, d1, d2 = d0 / norm, 1.0 / norm, d2 / norm
+                    target[i, 0] = Ci[0] * d0 + Ci[3] * d1 + Ci[6] * d2  # C_0^T d
+                    target[i, 1] = Ci[1] * d0 + Ci[4] * d1 + Ci[7] * d2
+                    target[i, 2] = Ci[2] * d0 + Ci[5] * d1 + Ci[8] * d2
+            x0 = z0 = 0.0
+            for i in range(n_s):
+                Ci, t = C[camera_of[i]], target[i]
+                Ri = R[attitude_of[i]]
+                v0 = Ri[0] * t[0] + Ri[3] * t[1] + Ri[6] * t[2]  # R_k^T target
+                v1 = Ri[1] * t[0] + Ri[4] * t[1] + Ri[7] * t[2]
+                v2 = Ri[2] * t[0] + Ri[5] * t[1] + Ri[8] * t[2]
+                u0 = Ci[0] * v0 + Ci[1] * v1 + Ci[2] * v2
+                u1 = Ci[3] * v0 + Ci[4] * v1 + Ci[5] * v2
+                u2 = Ci[6] * v0 + Ci[7] * v1 + Ci[8] * v2
+                x, z = k_x * u0 / u1, k_z * u2 / u1
+                if i == 0:
+                    x0, z0 = x, z
+                else:
+                    x, z = (x - x0) / steps[i], (z - z0) / steps[i]
+                out[b, k, 0, i], out[b, k, 1, i] = x, z
+
+
+@nb.njit(cache=True, nogil=True)
+def rocking_gyro(t, amplitude, frequency, phase, imu, bias):  # pragma: no cover - compiled
+    """Sinusoidal rocking and the noise-free output of an IMU on the carrier.
+
+    Angles ``a sin(2 pi f t + phase)`` (yaw, pitch, roll; Z-X-Y), the body rate
+    ``w_b = [c_g th' - s_g c_th psi', ga' + s_th psi', s_g th' + c_g c_th psi']`` and the IMU
+    output ``imu_b w_b + bias_b`` (:class:`montecarlo.seed001.kinematics.Rocking`,
+    :func:`montecarlo.seed001.kinematics.measured_rate`).
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,) [s]
+    amplitude, frequency, phase : ndarray, shape (B, 3) [rad], [Hz], [rad]
+    imu : ndarray, shape (B, 3, 3)
+        ``C_b^g``.
+    bias : ndarray, shape (B, 3) [rad/s]
+
+    Returns
+    -------
+    angles : ndarray, shape (B, M, 3) [rad]
+    output : ndarray, shape (B, M, 3) [rad/s]
+
+    References
+    ----------
+    seed 001, eq. (1).
+    """
+    n_b, m = amplitude.shape[0], t.size
+    angles = np.empty((n_b, m, 3))
+    output = np.empty((n_b, m, 3))
+    a = np.empty(3)
+    w = np.empty(3)
+    for b in range(n_b):
+        for i in range(3):
+            w[i] = 2.0 * np.pi * frequency[b, i]
+        M = imu[b]
+        for k in range(m):
+            for i in range(3):
+                arg = w[i] * t[k] + phase[b, i]
+                angles[b, k, i] = amplitude[b, i] * np.sin(arg)
+                a[i] = amplitude[b, i] * w[i] * np.cos(arg)
+            theta, gamma = angles[b, k, 1], angles[b, k, 2]
+            cg, sg, ct, st = np.cos(gamma), np.sin(gamma), np.cos(theta), np.sin(theta)
+            w0 = cg * a[1] - sg * ct * a[0]
+            w1 = a[2] + st * a[0]
+            w2 = sg * a[1] + cg * ct * a[0]
+            for i in range(3):
+                output[b, k, i] = (M[i, 0] * w0 + M[i, 1] * w1 + M[i, 2] * w2) + bias[b, i]
+    return angles, output
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _zxy(cp, sp, ct, st, cg, sg):  # pragma: no cover - compiled
+    """``R_y(gamma) R_x(theta) R_z(psi)`` from cosines and sines, seed 000, eq. (5)
+    (:func:`montecarlo.geometry.rotations.mounting_matrix`); 9 entries, row by row."""
+    return (cg * cp - sg * st * sp, cg * sp + sg * st * cp, -sg * ct,
+            -ct * sp, ct * cp, st,
+            sg * cp + cg * st * sp, sg * sp - cg * st * cp, cg * ct)
+
+
+@nb.njit(cache=True, nogil=True)
+def target_directions(carrier, camera, out):  # pragma: no cover - compiled
+    """Direction in the camera of the target its LOS aimed at at ``t_0``.
+
+    ``u_k = C_b^c(k) C_n^b(k) target``, both matrices Z-X-Y (seed 000, eq. (5)), ``target`` row
+    y of ``C_b^c(0) C_n^b(0)`` (in frame n).
+
+    Parameters
+    ----------
+    carrier, camera : ndarray, shape (6, B, N)
+        Cosines and sines ``[c_psi, s_psi, c_theta, s_theta, c_gamma, s_gamma]`` of the
+        carrier's angles and of the camera's (seed 001, eq. (2)).
+    out : ndarray, shape (B, N, 3)
+        Filled with the directions.
+
+    References
+    ----------
+    seed 001, eq. (2).
+    """
+    for b in range(out.shape[0]):
+        n = _zxy(carrier[0, b, 0], carrier[1, b, 0], carrier[2, b, 0], carrier[3, b, 0],
+                 carrier[4, b, 0], carrier[5, b, 0])
+        c = _zxy(camera[0, b, 0], camera[1, b, 0], camera[2, b, 0], camera[3, b, 0],
+                 camera[4, b, 0], camera[5, b, 0])
+        t0 = n[0] * c[3] + n[3] * c[4] + n[6] * c[5]  # C_n^b(0)^T (row y of C_b^c(0))
+        t1 = n[1] * c[3] + n[4] * c[4] + n[7] * c[5]
+        t2 = n[2] * c[3] + n[5] * c[4] + n[8] * c[5]
+        for k in range(out.shape[1]):
+            n = _zxy(carrier[0, b, k], carrier[1, b, k], carrier[2, b, k], carrier[3, b, k],
+                     carrier[4, b, k], carrier[5, b, k])
+            c = _zxy(camera[0, b, k], camera[1, b, k], camera[2, b, k], camera[3, b, k],
+                     camera[4, b, k], camera[5, b, k])
+            v0 = n[0] * t0 + n[1] * t1 + n[2] * t2
+            v1 = n[3] * t0 + n[4] * t1 + n[5] * t2
+            v2 = n[6] * t0 + n[7] * t1 + n[8] * t2
+            out[b, k, 0] = c[0] * v0 + c[1] * v1 + c[2] * v2
+            out[b, k, 1] = c[3] * v0 + c[4] * v1 + c[5] * v2
+            out[b, k, 2] = c[6] * v0 + c[7] * v1 + c[8] * v2
+
+
+@nb.njit(cache=True, nogil=True)
+def rls_pass(rows, obs, prior_mean, prior_cov, noise_var, forgetting, walk_transition,
+             walk_var):  # pragma: no cover - compiled
+    """One recursive-least-squares pass over time, a Kalman update per step.
+
+    The model of :func:`montecarlo.seed001.estimate.recursive_least_squares`:
+    ``y_k = A_k x + w_k + v_k`` with ``A_k = [rows_k, I_2]``, the offset ``w`` (the last two
+    states) a random walk ``w_k = F_k w_{k-1} + q_k``, ``q_k ~ N(0, diag(walk_var_k))``.
+
+    Parameters
+    ----------
+    rows : ndarray, shape (B, N, 2, p)
+    obs : ndarray, shape (B, N, 2)
+    prior_mean : ndarray, shape (B, p + 2)
+    prior_cov : ndarray, shape (B, p + 2, p + 2)
+    noise_var : float
+    forgetting : float in (0, 1]
+    walk_transition : ndarray, shape (B, N, 2, 2)
+    walk_var : ndarray, shape (B, N, 2)
+
+    Returns
+    -------
+    mean : ndarray, shape (B, p + 2)
+    cov : ndarray, shape (B, p + 2, p + 2)
+
+    References
+    ----------
+    seed 001, claim 1, third step (recursive least squares).
+    """
+    n_b, n, p = rows.shape[0], rows.shape[1], rows.shape[3]
+    q = p + 2
+    X = prior_mean.copy()
+    Ps = prior_cov.copy()
+    pat = np.empty((q, 2))
+    K = np.empty((q, 2))
+    for b in range(n_b):
+        x = X[b]
+        P = Ps[b]
+        for k in range(n):
+            if k > 0:
+                F = walk_transition[b, k]
+                w0, w1 = x[p], x[p + 1]
+                x[p] = F[0, 0] * w0 + F[0, 1] * w1
+                x[p + 1] = F[1, 0] * w0 + F[1, 1] * w1
+                for j in range(q):
+                    a, c = P[p, j], P[p + 1, j]
+                    P[p, j] = F[0, 0] * a + F[0, 1] * c
+                    P[p + 1, j] = F[1, 0] * a + F[1, 1] * c
+                for i in range(q):
+                    a, c = P[i, p], P[i, p + 1]
+                    P[i, p] = a * F[0, 0] + c * F[0, 1]
+                    P[i, p + 1] = a * F[1, 0] + c * F[1, 1]
+                P[p, p] += walk_var[b, k, 0]
+                P[p + 1, p + 1] += walk_var[b, k, 1]
+            if forgetting != 1.0:
+                for i in range(q):
+                    for j in range(q):
+                        P[i, j] /= forgetting
+            A = rows[b, k]
+            for i in range(q):
+                s0 = P[i, p]
+                s1 = P[i, p + 1]
+                for j in range(p):
+                    s0 += P[i, j] * A[0, j]
+                    s1 += P[i, j] * A[1, j]
+                pat[i, 0] = s0
+                pat[i, 1] = s1
+            S00 = pat[p, 0] + noise_var
+            S01 = pat[p, 1]
+            S10 = pat[p + 1, 0]
+            S11 = pat[p + 1, 1] + noise_var
+            r0 = obs[b, k, 0] - x[p]
+            r1 = obs[b, k, 1] - x[p + 1]
+            for j in range(p):
+                S00 += A[0, j] * pat[j, 0]
+                S01 += A[0, j] * pat[j, 1]
+                S10 += A[1, j] * pat[j, 0]
+                S11 += A[1, j] * pat[j, 1]
+                r0 -= A[0, j] * x[j]
+                r1 -= A[1, j] * x[j]
+            det = S00 * S11 - S01 * S10
+            i00, i01, i10, i11 = S11 / det, -S01 / det, -S10 / det, S00 / det
+            for i in range(q):
+                K[i, 0] = pat[i, 0] * i00 + pat[i, 1] * i10
+                K[i, 1] = pat[i, 0] * i01 + pat[i, 1] * i11
+            for i in range(q):
+                x[i] += K[i, 0] * r0 + K[i, 1] * r1
+            for i in range(q):  # P - K PAt^T, kept exactly symmetric
+                k0, k1 = K[i, 0], K[i, 1]
+                for j in range(i + 1):
+                    v = P[i, j] - (k0 * pat[j, 0] + k1 * pat[j, 1])
+                    P[i, j] = v
+                    P[j, i] = v
+    return X, Ps
+
+
+@nb.njit(cache=True, nogil=True)
+def walk_transition(J):  # pragma: no cover - compiled
+    """``F_k = J_k J_{k-1}^-1`` (``F_0 = I``), the turn of the LOS walk in
+    :func:`montecarlo.seed001.estimate.estimate`; the 2 x 2 inverse by formula.
+
+    Parameters
+    ----------
+    J : ndarray, shape (B, N, 2, 2) [px per px]
+        The aim point's Jacobian at each sample.
+
+    Returns
+    -------
+    ndarray, shape (B, N, 2, 2)
+
+    References
+    ----------
+    seed 001, claim 1, third step (the state's random walk).
+    """
+    n_b, n = J.shape[0], J.shape[1]
+    F = np.empty((n_b, n, 2, 2))
+    for b in range(n_b):
+        for k in range(n):
+            j = k - 1 if k > 0 else 0
+            a, c, d, e = J[b, j, 0, 0], J[b, j, 0, 1], J[b, j, 1, 0], J[b, j, 1, 1]
+            det = a * e - c * d
+            i00, i01, i10, i11 = e / det, -c / det, -d / det, a / det
+            for r in range(2):
+                x, y = J[b, k, r, 0], J[b, k, r, 1]
+                F[b, k, r, 0] = x * i00 + y * i10
+                F[b, k, r, 1] = x * i01 + y * i11
+    return F
+
+
+@nb.njit(cache=True, nogil=True)
+def drift_rows(t, gyro, eta, eps, k_x, k_z):  # pragma: no cover - compiled
+    """First-order image drift of the target per unit parameter (seed 001, eqs. (5)-(6)).
+
+    :func:`montecarlo.seed001.linear_model.drift_matrix` with its default rate model: the rate
+    rows ``[H, G]`` (:func:`~montecarlo.seed001.linear_model.los_rate_matrix`,
+    :func:`~montecarlo.seed001.linear_model.bias_rate_matrix`), turned back by the image roll
+    ``rho`` (:func:`~montecarlo.seed001.linear_model.image_roll_rate` integrated), integrated,
+    turned forward, and scaled to pixels ``[k_x phi_z, -k_z phi_x]``. Trapezoidal sums run in
+    the order of ``scipy.integrate.cumulative_trapezoid``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,) [s]
+    gyro : ndarray, shape (B, N, 3) [rad/s]
+    eta, eps : ndarray, shape (B, N) [rad]
+    k_x, k_z : float [px]
+
+    Returns
+    -------
+    ndarray, shape (B, N, 2, 7) [px per rad, px per rad/s]
+
+    References
+    ----------
+    seed 001, eqs. (5)-(6), re-derived and integrated over time.
+    """
+    n_b, n = gyro.shape[0], gyro.shape[1]
+    out = np.empty((n_b, n, 2, 7))
+    rate = np.empty((2, 7))
+    acc = np.empty((2, 7))
+    prev = np.empty((2, 7))
+    for b in range(n_b):
+        acc[:] = 0.0
+        rho = roll_prev = 0.0
+        for k in range(n):
+            wx, wy, wz = gyro[b, k, 0], gyro[b, k, 1], gyro[b, k, 2]
+            ce, se = np.cos(eps[b, k]), np.sin(eps[b, k])
+            ca, sa = np.cos(eta[b, k]), np.sin(eta[b, k])
+            rate[0, 0], rate[0, 1], rate[0, 2] = 0.0, -sa * wz, ca * wz  # seed 001, eq. (6)
+            rate[0, 3] = ca * wy - sa * wx
+            rate[1, 0] = (sa * wx - ca * wy) / ce  # derived, cf. eq. (6)
+            rate[1, 1] = ce * wy + se * ca * wz
+            rate[1, 2] = -ce * wx + se * sa * wz
+            rate[1, 3] = se * (ca * wx + sa * wy)
+            rate[0, 4], rate[0, 5], rate[0, 6] = -ca, -sa, 0.0  # gyro bias
+            rate[1, 4], rate[1, 5], rate[1, 6] = -se * sa, se * ca, -ce
+            roll = (-sa * wx + ca * wy) / ce
+            if k > 0:
+                rho += (t[k] - t[k - 1]) * (roll_prev + roll) / 2.0
+            roll_prev = roll
+            c, s = np.cos(rho), np.sin(rho)
+            for j in range(7):
+                y0 = c * rate[0, j] + s * rate[1, j]  # R(-rho) rate
+                y1 = -s * rate[0, j] + c * rate[1, j]
+                if k > 0:
+                    d = t[k] - t[k - 1]
+                    acc[0, j] += d * (prev[0, j] + y0) / 2.0
+                    acc[1, j] += d * (prev[1, j] + y1) / 2.0
+                prev[0, j], prev[1, j] = y0, y1
+                out[b, k, 0, j] = k_x * (s * acc[0, j] + c * acc[1, j])  # k_x phi_z
+                out[b, k, 1, j] = -k_z * (c * acc[0, j] - s * acc[1, j])  # -k_z phi_x
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def _gimbal_rates(wx, wy, wz, eta, eps):  # pragma: no cover - compiled
+    """(eta', eps') of seed 001, eq. (4); see :func:`montecarlo.seed001.kinematics.gimbal_rates`."""
+    ce, se, ca, sa = np.cos(eps), np.sin(eps), np.cos(eta), np.sin(eta)
+    return (-se * sa * wx + se * ca * wy - ce * wz) / ce, -ca * wx - sa * wy
+
+
+@nb.njit(cache=True, nogil=True)
+def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_eps
+               ):  # pragma: no cover - compiled
+    """Gimbal angles of eq. (4) integrated by the classical Runge-Kutta method.
+
+    The loop's rate is ``transform_b (rate - bias_b) + transform_b noise_k``: the rate sampled at
+    the steps and their mid-points, white noise held over each step.
+
+    Parameters
+    ----------
+    h : ndarray, shape (N - 1,) [s]
+    rate : ndarray, shape (B, 2 N - 1, 3) [rad/s]
+        At ``t_0, t_0 + h_0/2, t_1, ...``.
+    noise : ndarray, shape (B, N, 3) [rad/s]
+    transform : ndarray, shape (B, 3, 3)
+    bias : ndarray, shape (B, 3) [rad/s]
+    eta0, eps0, offset_eta, offset_eps : ndarray, shape (B,) [rad]
+        Initial angles; offsets added where eq. (4) is evaluated.
+
+    Returns
+    -------
+    eta, eps : ndarray, shape (B, N) [rad]
+
+    References
+    ----------
+    seed 001, eq. (4).
+    """
+    n_b, m = rate.shape[0], (rate.shape[1] - 1) // 2
+    eta = np.empty((n_b, m + 1))
+    eps = np.empty((n_b, m + 1))
+    w = np.empty((3, 3))
+    for b in range(n_b):
+        T = transform[b]
+        e, p = eta0[b], eps0[b]
+        oe, op = offset_eta[b], offset_eps[b]
+        eta[b, 0], eps[b, 0] = e, p
+        for k in range(m):
+            n0, n1, n2 = noise[b, k, 0], noise[b, k, 1], noise[b, k, 2]
+            for s in range(3):
+                r0 = rate[b, 2 * k + s, 0] - bias[b, 0]
+                r1 = rate[b, 2 * k + s, 1] - bias[b, 1]
+                r2 = rate[b, 2 * k + s, 2] - bias[b, 2]
+                for i in range(3):
+                    w[s, i] = ((T[i, 0] * r0 + T[i, 1] * r1 + T[i, 2] * r2)
+                               + (T[i, 0] * n0 + T[i, 1] * n1 + T[i, 2] * n2))
+            hk = h[k]
+            a1, b1 = _gimbal_rates(w[0, 0], w[0, 1], w[0, 2], e + oe, p + op)
+            a2, b2 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a1 + oe,
+                                   p + 0.5 * hk * b1 + op)
+            a3, b3 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a2 + oe,
+                                   p + 0.5 * hk * b2 + op)
+            a4, b4 = _gimbal_rates(w[2, 0], w[2, 1], w[2, 2], e + hk * a3 + oe, p + hk * b3 + op)
+            e = e + hk / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+            p = p + hk / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
+            eta[b, k + 1], eps[b, k + 1] = e, p
+    return eta, eps
