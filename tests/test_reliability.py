@@ -321,7 +321,7 @@ def test_loky_workers_do_not_outlive_a_killed_run(tmp_path):
 
 
 def test_ctrl_c_ends_with_one_line_that_says_a_rerun_resumes(tmp_path):
-    path = study_file(tmp_path, trials=5 * 10**7,
+    path = study_file(tmp_path, trials=10**8,  # points long enough to be caught mid-run
                       extra='[[sweep]]\n"geometry.L_m" = [50.0, 70.0, 90.0]\n')
     out = tmp_path / "runs" / "out"
     proc = subprocess.Popen([sys.executable, "-m", "montecarlo", "run", str(path), "--quiet",
