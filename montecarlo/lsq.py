@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,8 +16,40 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 
+class ParameterSummary:
+    """Named values, standard errors, correlations and chi2_red of a fit result.
+
+    For a (data)class with ``names``, ``values``, ``covariance``, ``chi2`` and ``dof``.
+    """
+
+    if TYPE_CHECKING:
+        names: tuple[str, ...]
+        values: FloatArray
+        covariance: FloatArray
+        chi2: float
+        dof: int
+
+    @property
+    def params(self) -> dict[str, float]:
+        return dict(zip(self.names, self.values.tolist(), strict=True))
+
+    @property
+    def stderr(self) -> dict[str, float]:
+        return dict(zip(self.names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
+
+    @property
+    def correlation(self) -> FloatArray:
+        """(p, p) correlation matrix of the values."""
+        s = np.sqrt(np.diag(self.covariance))
+        return self.covariance / np.outer(s, s)
+
+    @property
+    def chi2_red(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else math.nan
+
+
 @dataclass(frozen=True)
-class LeastSquaresFit:
+class LeastSquaresFit(ParameterSummary):
     """Weighted least-squares solution of a model with named parameters.
 
     Attributes
@@ -37,30 +70,12 @@ class LeastSquaresFit:
     effects: tuple[str, ...] = ()
 
     @property
-    def params(self) -> dict[str, float]:
-        return dict(zip(self.names, self.values.tolist(), strict=True))
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        return dict(zip(self.names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
-
-    @property
-    def correlation(self) -> FloatArray:
-        """(p, p) correlation matrix of the values."""
-        s = np.sqrt(np.diag(self.covariance))
-        return self.covariance / np.outer(s, s)
-
-    @property
-    def chi2(self) -> float:
+    def chi2(self) -> float:  # type: ignore[override]
         return float(self.residual @ self.residual)
 
     @property
-    def dof(self) -> int:
+    def dof(self) -> int:  # type: ignore[override]
         return self.residual.size - len(self.names)
-
-    @property
-    def chi2_red(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else math.nan
 
     @property
     def p_value(self) -> float:

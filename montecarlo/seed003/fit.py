@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
+from montecarlo.lsq import ParameterSummary
 from montecarlo.seed003.model import (
     BASE_EFFECTS,
     EFFECTS,
@@ -54,7 +55,7 @@ class NotSeparable(ValueError):
 
 
 @dataclass(frozen=True)
-class Fit:
+class Fit(ParameterSummary):
     """Least-squares solution of one calibration.
 
     Attributes
@@ -80,17 +81,6 @@ class Fit:
     dof: int
     passes: list[float] = field(default_factory=list)
 
-    @property
-    def params(self) -> dict[str, float]:
-        return dict(zip(self.names, self.values.tolist(), strict=True))
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        return dict(zip(self.names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
-
-    @property
-    def chi2_red(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else math.nan
 
 
 def min_mirrors(n_parameters: int) -> int:

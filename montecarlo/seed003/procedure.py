@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, solve_triangular
 from scipy.optimize import least_squares
 
+from montecarlo.lsq import ParameterSummary
 from montecarlo.seed003 import reference as ref
 from montecarlo.seed003.model import (
     Noise,
@@ -92,7 +93,7 @@ class ProcedureData:
 
 
 @dataclass(frozen=True)
-class ProcedureFit:
+class ProcedureFit(ParameterSummary):
     """Result of :func:`fit_procedure`; angles [rad].
 
     ``residuals``/``residuals_before`` (m, 2): relative heading and pitch, reading minus model,
@@ -114,22 +115,6 @@ class ProcedureFit:
     rolls: FloatArray
     side: float
 
-    @property
-    def params(self) -> dict[str, float]:
-        return dict(zip(self.names, self.values.tolist(), strict=True))
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        return dict(zip(self.names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
-
-    @property
-    def correlation(self) -> FloatArray:
-        s = np.sqrt(np.diag(self.covariance))
-        return self.covariance / np.outer(s, s)
-
-    @property
-    def chi2_red(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else math.nan
 
 
 class _Model:
