@@ -333,12 +333,15 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                           "measured data")
     dsub = diag.add_subparsers(dest="diagnose_command", required=True, parser_class=Parser)
 
-    def common(p: argparse.ArgumentParser) -> None:
+    def basic(p: argparse.ArgumentParser) -> None:
         add_json_option(p, "the diagnosis")
-        p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and "
-                       "plots (residuals, gap, Monte Carlo of the residual statistic)")
         p.add_argument("--alpha", type=probability, default=0.01,
                        help="significance of the tests (default 0.01)")
+
+    def common(p: argparse.ArgumentParser) -> None:
+        basic(p)
+        p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and "
+                       "plots (residuals, gap, Monte Carlo of the residual statistic)")
         p.add_argument("--trials", type=nonnegative_int, default=200,
                        help="Monte Carlo data sets per model in --report (default 200; 0: none)")
         p.add_argument("--seed", type=nonnegative_int, default=0,
@@ -390,9 +393,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="camera mount of the base model (patent)")
     p.add_argument("--gyro-sampling", choices=("point", "interval-mean"), default="point",
                    help="what a gyro row holds (point)")
-    add_json_option(p, "the diagnosis")
-    p.add_argument("--alpha", type=probability, default=0.01,
-                   help="significance of the tests (default 0.01)")
+    basic(p)
     p.set_defaults(func=_cmd_diagnose_stabilization)
 
     syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
