@@ -19,15 +19,8 @@ from montecarlo.seed001 import kinematics as kin
 from montecarlo.seed001 import linear_model as lin
 from montecarlo.seed001 import simulate as sim
 from montecarlo.systems import stabilization as ss
+from tests.test_stabilization_estimation import BIAS, DELTA_G, DELTA_P, QUIET, ROCK, SETUP, D
 
-D = np.pi / 180.0
-ROCK = kin.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
-SETUP = sim.Setup(duration=20.0, rate=50.0, aim_azimuth=20 * D, aim_pitch=10 * D,
-                  image_noise=0.1, gyro_noise=np.radians(0.01) / 60.0)
-QUIET = dataclasses.replace(SETUP, gyro_noise=0.0, image_noise=0.0)
-DELTA_G = np.array([0.5, -0.3, 0.7]) * D
-DELTA_P = np.array([0.4, 0.6, -0.6]) * D
-BIAS = np.array([1.0, -2.0, 0.5]) * D / 3600.0
 VARIANTS = [(m, s, tp) for m in kin.MOUNTS for s in sim.GYRO_SAMPLINGS
             for tp in [(0.0, 0.0), (240.0, -180.0)]]
 
