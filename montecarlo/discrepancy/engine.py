@@ -323,6 +323,42 @@ def _explains(U: FloatArray, winner: CandidateTest, residual: FloatArray, alpha:
     return bool(stats.chi2.sf(T, basis.shape[1]) >= alpha)
 
 
+def effect_for_observation(observation: CandidateTest, effects: Sequence[CandidateTest],
+                           residual: FloatArray, level: float, alpha: float = ALPHA,
+                           absorbed: float = ABSORBED) -> CandidateTest | None:
+    """The effect to adapt before a flagged observation, if one explains its signal.
+
+    An effect of ``effects`` (Holm-significant) explains the observation's signal when,
+    fitted instead (linearised), it leaves the observation's shift insignificant at ``level``
+    (its family's share of ``alpha``, :func:`separated`). Several effects present together
+    can concentrate their signal on the observations of largest leverage (an INS scale
+    factor and a pitch bias at the outermost mirrors), so a pair of effects also explains it
+    when, fitted together, they leave the shift insignificant at ``level`` while their own
+    columns, given the shift, stay significant at ``alpha`` (the observation alone does not
+    explain them). The strongest effect (smallest p-value) that explains the signal, alone
+    or in such a pair, is returned; None if none does.
+    """
+    ranked = sorted(effects, key=lambda t: (t.log_p, t.dof))
+    for t in ranked:
+        if not separated(observation, t, residual, level, absorbed):
+            return t
+    for t in ranked:
+        for other in ranked:
+            if other.name == t.name:
+                continue
+            pair = np.column_stack([t.projected, other.projected])
+            if _explains(_orthonormal(pair), observation, residual, level, absorbed) \
+                    and not _explains(observation.basis, _columns(pair), residual, alpha,
+                                      absorbed):
+                return t
+    return None
+
+
+def _columns(projected: FloatArray) -> CandidateTest:
+    """A nameless candidate of the given projected columns (for :func:`_explains`)."""
+    return CandidateTest("", "testable", basis=_orthonormal(projected), projected=projected)
+
+
 def contained(inner: CandidateTest, outer: CandidateTest, level: float = CONFOUNDED) -> bool:
     """Does ``inner``'s projected column space lie (nearly) inside ``outer``'s: every
     canonical correlation of the two spaces above ``level`` (``inner`` has fewer columns)?"""
@@ -525,12 +561,11 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             break
         win = min(eligible, key=lambda t: (t.log_p, t.dof))
         if is_outlier(win.name):
-            # an effect that explains the observation's signal (the observation is no longer
-            # significant at its family's level once the effect is fitted) comes first
+            # an effect that explains the observation's signal (alone or with one other
+            # effect) comes first
             level = alpha / max(1, sum(t.status == "testable" for t in snoop))
-            win = next((t for t in sorted(eligible, key=lambda t: (t.log_p, t.dof))
-                        if not is_outlier(t.name)
-                        and not separated(win, t, fit.residual, level, absorbed)), win)
+            win = effect_for_observation(win, [t for t in eligible if not is_outlier(t.name)],
+                                         fit.residual, level, alpha, absorbed) or win
         if not is_outlier(win.name):
             stand_in = minimal_member(
                 win, [t for t in eligible if not is_outlier(t.name)],
