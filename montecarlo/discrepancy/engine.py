@@ -605,7 +605,11 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
         # a candidate absorbed by a named effect may replace it with fewer parameters
         smaller = [t.name for t in steps[0].tests if t.status == "testable"
                    and t.name not in dropped and t.name not in named and t.name not in others]
-        fit, swaps = _swap(full, fit, named, others, fixed, smaller, alpha)
+        # candidates enter with their active parameters only (as an adapted winner does)
+        inactive = {p for tests, names in ((steps[0].tests, smaller), (steps[-1].tests, others))
+                    for t in tests if t.name in names
+                    for p in full.effect(t.name).parameters if p not in t.active}
+        fit, swaps = _swap(full, fit, named, others, fixed | inactive, smaller, alpha)
         for out, into, *_ in swaps:
             named[named.index(out)] = into
     final = steps[-1]
@@ -671,14 +675,16 @@ def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
     parameters must also lower chi2 by more than the ``1 - alpha`` quantile of chi2(k), as a
     test of the extra parameters would (AIC alone accepts two unneeded parameters, a lever arm
     for the range bias it contains, with probability P(chi2(2) > 4) = 13.5 %). Candidates of
-    ``smaller`` (absorbed by the final model) replace only an effect with more parameters.
-    Returns the final fit and the swaps made."""
+    ``smaller`` (absorbed by the final model) replace only an effect with more parameters
+    (those not held at zero by ``fixed``). Returns the final fit and the swaps made."""
     swaps: list[tuple[str, str, float, float]] = []
     named, others = list(named), [*others, *smaller]
 
+    def size(name: str) -> int:
+        return len(set(problem.effect(name).parameters) - fixed)
+
     def allowed(out: str, into: str) -> bool:
-        return into not in smaller or \
-            len(problem.effect(into).parameters) < len(problem.effect(out).parameters)
+        return into not in smaller or size(into) < size(out)
 
     def aic(f: LeastSquaresFit) -> float:
         return f.chi2 + 2.0 * len(f.names)
