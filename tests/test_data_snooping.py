@@ -200,3 +200,34 @@ def test_an_axis_offset_standing_in_for_a_pitch_bias_is_swapped_for_it(seed):
     assert d.swaps[0][3] < d.swaps[0][2]
     assert sorted(d.named) == ["frame_misalignment", "ins_bias", "ins_scale_factor"]
     assert "ins_pitch_bias" in d.after.params and "ins_heading_bias" not in d.after.params
+
+
+def test_a_pair_of_effects_explains_an_observation_only_when_it_is_needed_besides_it():
+    """Linear picture: observation 0 (column e0) and two effects a = e0 + u, b = e0 - u
+    (u orthogonal to e0, spread over the other observations). Neither effect alone explains
+    a spike at observation 0, the pair does; the pair comes first only when the data also
+    carry a signal along u that the observation cannot explain."""
+    from montecarlo.discrepancy.engine import CandidateTest, effect_for_observation
+
+    rng = np.random.default_rng(5)
+    n = 30
+    e0 = np.eye(n)[:, :1]
+    u = np.r_[0.0, rng.standard_normal(n - 1)][:, None]
+    u /= np.linalg.norm(u)
+
+    def candidate(name, column, log_p):
+        return CandidateTest(name, "testable", statistic=1.0, dof=1, log_p=log_p,
+                             basis=column / np.linalg.norm(column), projected=column)
+
+    observation = candidate("outlier:0", e0, -30.0)
+    a, b = candidate("a", e0 + u, -20.0), candidate("b", e0 - u, -10.0)
+    noise = 0.5 * rng.standard_normal(n)
+    spike = 8.0 * e0[:, 0] + noise
+    level = 0.01 / n
+    assert effect_for_observation(observation, [a], spike, level) is None
+    assert effect_for_observation(observation, [a, b], spike, level) is None
+    systematic = spike + 6.0 * u[:, 0]
+    assert effect_for_observation(observation, [b, a], systematic, level).name == "a"
+    e1 = np.eye(n)[:, 1:2]  # a pair that does not reach observation 0 never explains it
+    elsewhere = [candidate("c", e1 + u, -20.0), candidate("d", e1 - u, -10.0)]
+    assert effect_for_observation(observation, elsewhere, systematic, level) is None
