@@ -24,11 +24,12 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
-from montecarlo.discrepancy.design import inject_at_mdb
-from montecarlo.discrepancy.engine import analyse_candidates
+from montecarlo.discrepancy.design import design_mdb, inject_at_mdb
+from montecarlo.discrepancy.engine import ALPHA, analyse_candidates
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.geometry.camera import Camera
@@ -92,6 +93,39 @@ SEVERAL = {"ground": ("radial_distortion", "target_height_scale", "drift"),
            "collimation": ("frame_misalignment", "ins_scale_factor", "ins_bias")}
 CONFOUNDED_PAIR = ("focal_scale", "target_range_bias")
 """Two ground effects of which one (the range bias) has a confounded partner (a lever arm)."""
+
+
+def power_given(effect: str, given: tuple[str, ...], multiple: float = 2.0,
+                alpha: float = ALPHA) -> dict[str, float]:
+    """How detectable ``effect``, injected first at ``multiple`` times its MDB of the base
+    model (as the robust ground rows inject it), stays once the ``given`` effects are in the
+    model, on the ground design of :data:`OTHER_DESIGNS` (noise-free data).
+
+    Returns ``injected`` (its first parameter [SI]), ``mdb`` (that parameter's MDB given
+    ``given``, :func:`montecarlo.discrepancy.design.design_mdb`), ``lambda`` (noncentrality
+    of the injection given ``given``), ``lambda0`` (the chain's, there) and ``power``: the
+    probability that the global test (``alpha``) still rejects once ``given`` is fitted,
+    the step the diagnosis needs to go on to ``effect``.
+    """
+    p = {**sd.GROUND_DEFAULTS, **OTHER_DESIGNS["ground"]}
+    camera = Camera(p["fov_yaw"], p["fov_pitch"], p["n_x"], p["n_z"])
+    truth = {k: float(p[k]) for k in ("psi", "theta", "gamma")}
+    layout = sd.default_layout(camera, truth)
+
+    def exact(tr: dict[str, float]) -> Any:
+        return ge.exact_problem(layout, camera, tr, float(p["pixel_sigma"]),
+                                float(p["survey_sigma"]))
+
+    problem = exact(truth)
+    injection = inject_at_mdb(exact, truth, effect, multiple, alpha)
+    name = problem.effect(effect).parameters[0]
+    fit = fit_model(problem, given, truth)
+    test = next(t for t in analyse_candidates(problem, fit, alpha) if t.name == effect)
+    lam = float(np.sum((test.projected @ np.array([injection[q] for q in test.active])) ** 2))
+    return {"injected": injection[name],
+            "mdb": design_mdb(problem, truth, given, effect, alpha=alpha)[name],
+            "lambda": lam, "lambda0": test.lambda0,
+            "power": float(stats.ncx2.sf(stats.chi2.isf(alpha, fit.dof), fit.dof, lam))}
 
 
 def robust_scenarios(system: str) -> list[dict[str, Any]]:
