@@ -514,8 +514,10 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
 
     Observations (``problem.observations``) are candidates of their own (data snooping): each
     step tests every observation's mean shift, as a second family under Holm's procedure at
-    ``alpha``, and the winner is the effect or observation with the smallest p-value. A
-    flagged observation gets its shift parameters (it no longer weighs on the fit). After each
+    ``alpha``, and the winner is the effect or observation with the smallest p-value, unless
+    an effect explains the observation's signal, alone or with one other
+    (:func:`effect_for_observation`): that effect comes first. A flagged observation gets its
+    shift parameters (it no longer weighs on the fit). After each
     effect is added, every named effect is tested given the others (Wald, Holm at ``alpha``);
     the least significant of those that are not is dropped and the model refitted, until all
     are significant. A dropped effect is not named again.
