@@ -120,7 +120,8 @@ def test_spline_at_equals_scipy_cubic_spline():
         g1, g2 = se.gauss_points(t)
         spline = CubicSpline(t, y, axis=1)
         for got, g in zip(kernels.spline_at(t, y, g1, g2), (g1, g2), strict=True):
-            np.testing.assert_allclose(got, spline(g), rtol=0, atol=1e-12 * np.abs(y).max())
+            np.testing.assert_allclose(got, np.moveaxis(spline(g), 0, -1), rtol=0,
+                                       atol=1e-12 * np.abs(y).max())
 
 
 def test_predicted_pixels_equal_predict_los(case):

@@ -262,9 +262,10 @@ class LosModel:
     The gyro output is splined once (:func:`rate_spline` is linear, so the rate of any
     parameters is the same affine map of the splined gyro output, applied by
     :func:`kernels.predicted_pixels`; :func:`kernels.spline_at` for point samples, scipy for
-    interval means) and the cosines and sines of the gimbal angles are taken once. The
-    prediction and the forward differences of the Jacobian are one kernel call; sets that share
-    the base's attitude or camera share their computation.
+    interval means) and the cosines and sines of the gimbal angles are taken once, both with
+    the runs last (the kernel's layout). The prediction and the forward differences of the
+    Jacobian are one kernel call; sets that share the base's attitude or camera share their
+    computation.
 
     Parameters
     ----------
@@ -288,8 +289,10 @@ class LosModel:
             self.w1, self.w2 = kernels.spline_at(t, gyro, *gauss_points(t))
         else:
             spline = rate_spline(t, gyro, gyro_sampling)
-            self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
-        self.trig = [f(np.asarray(a, float)) for a in (eta, eps) for f in (np.cos, np.sin)]
+            self.w1, self.w2 = (np.ascontiguousarray(np.moveaxis(spline(g), 0, -1))
+                                for g in gauss_points(t))
+        self.trig = [f(np.ascontiguousarray(np.asarray(a, float).T))
+                     for a in (eta, eps) for f in (np.cos, np.sin)]
         self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
         self.shape = np.shape(eta)
         self.inner = check_mount(mount) == "inner-gimbal"
