@@ -98,8 +98,8 @@ def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, nogil=True)
 def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_eps, s_eps,
-                     installation, offsets, camera_of, aim, k_x, k_z, steps,
-                     out):  # pragma: no cover - compiled
+                     installation, offsets, camera_of, aim, k_x, k_z, steps, out,
+                     diff):  # pragma: no cover - compiled
     """Image of a fixed target imaged at ``aim`` at ``t_0``, for several sets of parameters.
 
     The carrier's attitude ``R_k = C_{b_k}^{b_0}`` is the prefix product of the steps'
@@ -143,8 +143,11 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
     k_x, k_z : float [px]
     steps : ndarray, shape (S,)
         0 for set 0; else set ``s`` gives the forward difference ``(x_s - x_0) / step_s``.
-    out : ndarray, shape (B, N, 2, S)
-        Filled with the image of set 0 [px] and the differences of the others.
+    out : ndarray, shape (B, N, 2)
+        Filled with the image of set 0 [px].
+    diff : ndarray, shape (B, N, 2, S - 1)
+        Filled with the forward differences of the other sets (contiguous, as
+        :func:`rls_pass` reads its rows fastest that way).
 
     References
     ----------
@@ -275,9 +278,10 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
                 x, z = k_x * u0 / u1, k_z * u2 / u1
                 if i == 0:
                     x0[b], z0[b] = x, z
+                    out[b, k, 0], out[b, k, 1] = x, z
                 else:
-                    x, z = (x - x0[b]) / st_i, (z - z0[b]) / st_i
-                out[b, k, 0, i], out[b, k, 1, i] = x, z
+                    diff[b, k, 0, i - 1] = (x - x0[b]) / st_i
+                    diff[b, k, 1, i - 1] = (z - z0[b]) / st_i
 
 
 @nb.njit(cache=True, nogil=True)
