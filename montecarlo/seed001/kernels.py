@@ -96,6 +96,23 @@ def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
     return out1, out2
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _magnus_vector(hh, cc, wa, wb, T, bias, b):  # pragma: no cover - compiled
+    """Rotation vector of one step of run ``b`` in :func:`predicted_pixels`: ``hh (r1 + r2)
+    + cc r1 x r2`` with ``r = T (w - bias)`` (all arrays with the runs last)."""
+    u0, u1, u2 = wa[0, b] - bias[0, b], wa[1, b] - bias[1, b], wa[2, b] - bias[2, b]
+    x0 = T[0, b] * u0 + T[1, b] * u1 + T[2, b] * u2
+    x1 = T[3, b] * u0 + T[4, b] * u1 + T[5, b] * u2
+    x2 = T[6, b] * u0 + T[7, b] * u1 + T[8, b] * u2
+    u0, u1, u2 = wb[0, b] - bias[0, b], wb[1, b] - bias[1, b], wb[2, b] - bias[2, b]
+    y0 = T[0, b] * u0 + T[1, b] * u1 + T[2, b] * u2
+    y1 = T[3, b] * u0 + T[4, b] * u1 + T[5, b] * u2
+    y2 = T[6, b] * u0 + T[7, b] * u1 + T[8, b] * u2
+    return (hh * (x0 + y0) + cc * (x1 * y2 - x2 * y1),
+            hh * (x1 + y1) + cc * (x2 * y0 - x0 * y2),
+            hh * (x2 + y2) + cc * (x0 * y1 - x1 * y0))
+
+
 @nb.njit(cache=True, nogil=True)
 def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_eps, s_eps,
                      installation, offsets, camera_of, aim, k_x, k_z, steps, out,
@@ -162,8 +179,6 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
     R = np.empty((n_s, 9, n_b))
     C = np.empty((n_s, 9, n_b))
     q = np.empty((4, n_b))  # quaternion of each run's step
-    rot = np.empty((3, n_b))  # its rotation vector
-    a2s = np.empty(n_b)
     x0 = np.empty(n_b)
     z0 = np.empty(n_b)
     c0 = np.sqrt(3.0) / 12.0
@@ -190,31 +205,19 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
                 Ti, bi, Ri = T[i], bs[i], R[i]
                 big = False
                 for b in range(n_b):
-                    u0, u1, u2 = wa[0, b] - bi[0, b], wa[1, b] - bi[1, b], wa[2, b] - bi[2, b]
-                    r0 = Ti[0, b] * u0 + Ti[1, b] * u1 + Ti[2, b] * u2
-                    r1 = Ti[3, b] * u0 + Ti[4, b] * u1 + Ti[5, b] * u2
-                    r2 = Ti[6, b] * u0 + Ti[7, b] * u1 + Ti[8, b] * u2
-                    u0, u1, u2 = wb[0, b] - bi[0, b], wb[1, b] - bi[1, b], wb[2, b] - bi[2, b]
-                    y0 = Ti[0, b] * u0 + Ti[1, b] * u1 + Ti[2, b] * u2
-                    y1 = Ti[3, b] * u0 + Ti[4, b] * u1 + Ti[5, b] * u2
-                    y2 = Ti[6, b] * u0 + Ti[7, b] * u1 + Ti[8, b] * u2
-                    vx = hh * (r0 + y0) + cc * (r1 * y2 - r2 * y1)
-                    vy = hh * (r1 + y1) + cc * (r2 * y0 - r0 * y2)
-                    vz = hh * (r2 + y2) + cc * (r0 * y1 - r1 * y0)
+                    vx, vy, vz = _magnus_vector(hh, cc, wa, wb, Ti, bi, b)
                     a2 = vx * vx + vy * vy + vz * vz
                     scale = 0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 + a2 * (
                         -1.0 / 645120.0 + a2 / 185794560.0)))
                     q[3, b] = 1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 + a2 * (
                         -1.0 / 46080.0 + a2 / 10321920.0)))
                     q[0, b], q[1, b], q[2, b] = scale * vx, scale * vy, scale * vz
-                    a2s[b] = a2
-                    rot[0, b], rot[1, b], rot[2, b] = vx, vy, vz
                     big |= a2 >= SERIES_ANGLE_SQ
-                if big:
+                if big:  # sine and cosine where the series is not exact
                     for b in range(n_b):
-                        a2 = a2s[b]
+                        vx, vy, vz = _magnus_vector(hh, cc, wa, wb, Ti, bi, b)
+                        a2 = vx * vx + vy * vy + vz * vz
                         if a2 >= SERIES_ANGLE_SQ:
-                            vx, vy, vz = rot[0, b], rot[1, b], rot[2, b]
                             angle = np.sqrt(a2)
                             scale = np.sin(0.5 * angle) / angle
                             q[3, b] = np.cos(0.5 * angle)
