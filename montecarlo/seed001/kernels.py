@@ -579,11 +579,28 @@ def drift_rows(t, gyro, eta, eps, k_x, k_z):  # pragma: no cover - compiled
     return out
 
 
-@nb.njit(cache=True, nogil=True)
-def _gimbal_rates(wx, wy, wz, eta, eps):  # pragma: no cover - compiled
-    """(eta', eps') of seed 001, eq. (4); see :func:`montecarlo.seed001.kinematics.gimbal_rates`."""
-    ce, se, ca, sa = np.cos(eps), np.sin(eps), np.cos(eta), np.sin(eta)
+@nb.njit(cache=True, nogil=True, inline="always")
+def _gimbal_rates(wx, wy, wz, ca, sa, ce, se):  # pragma: no cover - compiled
+    """(eta', eps') of seed 001, eq. (4), from the cosines and sines of eta and eps; see
+    :func:`montecarlo.seed001.kinematics.gimbal_rates`."""
     return (-se * sa * wx + se * ca * wy - ce * wz) / ce, -ca * wx - sa * wy
+
+
+SMALL_TURN = 0.01
+"""Below this turn [rad] :func:`_turned` takes its cosine and sine from their Taylor series
+(terms up to the 8th power; the first omitted term is below 3e-24)."""
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _turned(c, s, d, angle):  # pragma: no cover - compiled
+    """Cosine and sine of ``angle = a + d`` from those of ``a`` (``c``, ``s``) by the sum
+    formulas, or directly when the turn ``d`` [rad] is not small."""
+    if abs(d) < SMALL_TURN:
+        d2 = d * d
+        sd = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0))))
+        cd = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 / 40320.0)))
+        return c * cd - s * sd, s * cd + c * sd
+    return np.cos(angle), np.sin(angle)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -592,7 +609,8 @@ def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_e
     """Gimbal angles of eq. (4) integrated by the classical Runge-Kutta method.
 
     The loop's rate is ``transform_b (rate - bias_b) + transform_b noise_k``: the rate sampled at
-    the steps and their mid-points, white noise held over each step.
+    the steps and their mid-points, white noise held over each step. Each step takes the cosines
+    and sines of its first stage's angles; its later stages turn them (:func:`_turned`).
 
     Parameters
     ----------
@@ -632,12 +650,18 @@ def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_e
                     w[s, i] = ((T[i, 0] * r0 + T[i, 1] * r1 + T[i, 2] * r2)
                                + (T[i, 0] * n0 + T[i, 1] * n1 + T[i, 2] * n2))
             hk = h[k]
-            a1, b1 = _gimbal_rates(w[0, 0], w[0, 1], w[0, 2], e + oe, p + op)
-            a2, b2 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a1 + oe,
-                                   p + 0.5 * hk * b1 + op)
-            a3, b3 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a2 + oe,
-                                   p + 0.5 * hk * b2 + op)
-            a4, b4 = _gimbal_rates(w[2, 0], w[2, 1], w[2, 2], e + hk * a3 + oe, p + hk * b3 + op)
+            ea, pa = e + oe, p + op  # eq. (4) at the stages' angles; the three later stages
+            ca, sa, ce, se = np.cos(ea), np.sin(ea), np.cos(pa), np.sin(pa)  # turn the first
+            a1, b1 = _gimbal_rates(w[0, 0], w[0, 1], w[0, 2], ca, sa, ce, se)
+            ca2, sa2 = _turned(ca, sa, 0.5 * hk * a1, e + 0.5 * hk * a1 + oe)
+            ce2, se2 = _turned(ce, se, 0.5 * hk * b1, p + 0.5 * hk * b1 + op)
+            a2, b2 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], ca2, sa2, ce2, se2)
+            ca3, sa3 = _turned(ca, sa, 0.5 * hk * a2, e + 0.5 * hk * a2 + oe)
+            ce3, se3 = _turned(ce, se, 0.5 * hk * b2, p + 0.5 * hk * b2 + op)
+            a3, b3 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], ca3, sa3, ce3, se3)
+            ca4, sa4 = _turned(ca, sa, hk * a3, e + hk * a3 + oe)
+            ce4, se4 = _turned(ce, se, hk * b3, p + hk * b3 + op)
+            a4, b4 = _gimbal_rates(w[2, 0], w[2, 1], w[2, 2], ca4, sa4, ce4, se4)
             e = e + hk / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
             p = p + hk / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
             eta[b, k + 1], eps[b, k + 1] = e, p
