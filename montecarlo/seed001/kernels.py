@@ -18,11 +18,12 @@ and is tested equal to it to about 1e-12 on the same inputs:
   and :func:`walk_transition` - the turn of its random walk;
 * :func:`rk4_gimbal` - :func:`montecarlo.seed001.simulate.integrate_gimbal`.
 
-Arrays have one batch axis (trials), first unless a kernel says otherwise; callers
-flatten theirs. Per-step matrices are kept in
-registers, never stored: arrays of them for a batch of runs take tens of MB, and touching fresh
-memory costs more than the arithmetic. No fastmath: the kernels keep IEEE arithmetic and differ
-from the numpy path only in the order of operations.
+Arrays have one batch axis (trials), first unless a kernel says otherwise; callers flatten
+theirs. Per-step matrices are never stored for the whole run: arrays of them for a batch of runs
+take tens of MB, and touching fresh memory costs more than the arithmetic (the current step's,
+for all runs of a batch, fit in the processor's cache). No fastmath: the kernels keep IEEE
+arithmetic and differ from the numpy path only in the order of operations and, in
+:func:`rk4_gimbal`, in cosines and sines of small turns by their series.
 
 References
 ----------
