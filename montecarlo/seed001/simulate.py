@@ -323,8 +323,9 @@ class Motion:
     omega_m : ndarray, shape (..., 2 N - 1, 3) [rad/s]
         IMU output (eq. (1), without noise) at ``t_0, t_0 + h/2, t_1, ...``.
     carrier : ndarray, shape (6, ..., N), or None
-        :func:`carrier_trig` of the carrier's angles at the sample times (None on the literal
-        path, which does not use it).
+        :func:`carrier_trig` of the carrier's angles at the sample times, where
+        :func:`target_view_compiled` uses it (the compiled path, patent mount, target at the
+        centre at ``t = 0``); else None.
     gyro : ndarray, shape (..., N, 3) [rad/s]
         The gyro rows without noise: ``omega_m`` at the sample times, or its interval means.
     """
@@ -362,7 +363,8 @@ def imu_motion(rocking: Rocking, setup: Setup, delta_g: ArrayLike, gyro_bias: Ar
                                 (bias, (3,)))]
         rock_angles, omega_m = (a.reshape(*batch, t_half.size, 3)
                                 for a in kernels.rocking_gyro(t_half, *flat))  # eq. (1)
-        carrier = carrier_trig(rock_angles[..., 0::2, :])
+        if setup.mount == "patent" and not np.any(setup.target_px):  # as simulate's image
+            carrier = carrier_trig(rock_angles[..., 0::2, :])
     if setup.gyro_sampling == "point":
         gyro = omega_m[..., 0::2, :]
     else:
