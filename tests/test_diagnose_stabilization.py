@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from montecarlo.discrepancy import stabilization_effects as ste
-from montecarlo.discrepancy.engine import diagnose
+from montecarlo.discrepancy.engine import canonical_correlation, diagnose
 from montecarlo.seed001 import estimate as se
 from montecarlo.seed001 import kinematics as kin
 from montecarlo.seed001 import linear_model as lin
@@ -79,6 +79,39 @@ def test_gyro_candidates_against_edited_recordings():
                                 shifted, QUIET.camera)
     undelayed = ste.predict_image(_values(PATENT, QUIET.target_px), shifted, QUIET.camera)
     assert np.abs(delayed - base).max() < 1e-3 * np.abs(undelayed - base).max()
+
+
+def test_los_lag_candidate_against_an_edited_recording():
+    """An LOS lag L reads gimbal and gyro L before the image's time stamp: on a recording whose
+    gyro and encoder rows are one interval late (the first repeated), a lag of minus one
+    interval restores the prediction of the unedited recording."""
+    run = sim.simulate(ROCK, QUIET, DELTA_G, DELTA_P, BIAS)
+    late = dataclasses.replace(run, **{k: np.concatenate([getattr(run, k)[:1],
+                                                          getattr(run, k)[:-1]])
+                                       for k in ("gyro", "eta", "eps")})
+    base = ste.predict_image(_values(PATENT, QUIET.target_px), run, QUIET.camera)
+    lagged = ste.predict_image(_values(PATENT, QUIET.target_px, servo_lag=-1.0 / QUIET.rate),
+                               late, QUIET.camera)
+    unlagged = ste.predict_image(_values(PATENT, QUIET.target_px), late, QUIET.camera)
+    assert np.abs(lagged - base).max() < 1e-3 * np.abs(unlagged - base).max()
+
+
+@pytest.mark.slow
+def test_interval_mean_rows_read_as_points_name_the_gyro_delay():
+    """Interval-mean gyro rows analysed as point samples are rows half an interval late, and
+    a little attenuated (the mean of a sinusoid over h is its value times 1 - (w h)^2 / 24, here
+    -4e-4 at 25 Hz): the diagnosis names gyro_time_delay first, at h/2, never servo_lag, and the
+    LOS lag is not its confounded partner (a gimbal-only lag was, and was named instead)."""
+    setup = dataclasses.replace(SETUP, gyro_sampling="interval-mean", target_px=(0.0, 0.0))
+    run = sim.simulate(ROCK, setup, DELTA_G, DELTA_P, BIAS, rng=4)
+    d = diagnose(ste.stabilization_problem(run, setup.camera, setup.image_noise,
+                                           setup.gyro_noise, gyro_sampling="point"))
+    assert d.named[0] == "gyro_time_delay" and "servo_lag" not in d.named
+    assert not d.unexplained
+    assert d.after.params["gyro_delay"] == pytest.approx(
+        0.5 / setup.rate, abs=4 * d.after.stderr["gyro_delay"])
+    first = {t.name: t for t in d.steps[0].tests}
+    assert canonical_correlation(first["gyro_time_delay"], first["servo_lag"]) < 0.9
 
 
 def test_whitening_is_the_inverse_cholesky_factor_of_the_walk_covariance():

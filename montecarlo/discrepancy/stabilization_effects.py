@@ -12,8 +12,18 @@ inner-gimbal mount. Every other effect is a candidate, absent when its parameter
 * ``gyro_scale_factor`` (``gyro_scale_x, _y, _z`` [1]): the IMU reads ``(1 + s) w``;
 * ``gyro_time_delay`` (``gyro_delay`` [s]): a gyro row holds the rate ``gyro_delay`` before its
   time stamp;
-* ``servo_lag`` (``servo_lag`` [s]): the gimbal (and the LOS) is where the encoders read
-  ``servo_lag`` earlier.
+* ``servo_lag`` (``servo_lag`` [s]): the LOS lags the image's time stamps: the frame stamped
+  ``t`` shows the gimbal and the carrier at ``t - servo_lag`` (encoder angles and gyro rate
+  both read that much earlier).
+
+The last two are timing errors of different streams. A stabilised LOS holds the target while
+gimbal and carrier move together, so shifting both in time (``servo_lag``) moves the image only
+by the LOS's residual drift, while shifting one against the other moves it by the whole
+stabilised motion: the two candidates are nearly independent. Gimbal angles read late against
+the gyro are, to first order, a gyro delay of the same size and are named
+``gyro_time_delay``. (A gimbal-only lag as a candidate would be confounded with the gyro delay:
+canonical correlation above 0.9996 on a 20 s run at 50 Hz, where the linearised identification
+step ranks the two by less than its own linearisation error.)
 
 The residuals are whitened with the LOS walk of gyro noise: the innovations of the Kalman filter
 of the walk (the estimator's, its transition fixed at the estimate), each divided by its
@@ -56,7 +66,7 @@ CANDIDATES = (
     Effect("gyro_time_delay", ("gyro_delay",), ((-0.1, 0.1),), (1e-5,),
            "gyro rows late by this time [s]"),
     Effect("servo_lag", ("servo_lag",), ((-0.1, 0.1),), (1e-5,),
-           "gimbal behind its encoder readings by this time [s]"),
+           "line of sight (gimbal and carrier) behind the image's time stamps by this time [s]"),
 )
 
 DISPLAY_UNITS = {
@@ -104,8 +114,10 @@ def predict_image(values: Mapping[str, FloatArray], data: Record, camera: Camera
     t = data.t
     gyro = data.gyro
     sampling = gyro_sampling
-    if "gyro_delay" in values:  # the rate at t is the row stamped t + delay
-        gyro = se.rate_spline(t, gyro, gyro_sampling)(t + p("gyro_delay")[..., None])
+    if "gyro_delay" in values or "servo_lag" in values:
+        # the rate at t is the row stamped t + delay; an image L late shows the rate at t - L
+        shift = p("gyro_delay") - p("servo_lag")
+        gyro = se.rate_spline(t, gyro, gyro_sampling)(t + shift[..., None])
         sampling = "point"
     gyro = gyro / (1.0 + vector("gyro_scale_x", "gyro_scale_y", "gyro_scale_z")[..., None, :])
     C_bg = mounting_matrix(0.0, p("delta_gx"), p("delta_gy"))  # seed 001, eq. (1), dgz = 0

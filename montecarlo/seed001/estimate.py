@@ -262,9 +262,10 @@ class LosModel:
     The gyro output is splined once (:func:`rate_spline` is linear, so the rate of any
     parameters is the same affine map of the splined gyro output, applied by
     :func:`kernels.predicted_pixels`; :func:`kernels.spline_at` for point samples, scipy for
-    interval means) and the cosines and sines of the gimbal angles are taken once. The
-    prediction and the forward differences of the Jacobian are one kernel call; sets that share
-    the base's attitude or camera share their computation.
+    interval means) and the cosines and sines of the gimbal angles are taken once, both with
+    the runs last (the kernel's layout). The prediction and the forward differences of the
+    Jacobian are one kernel call; sets that share the base's attitude or camera share their
+    computation.
 
     Parameters
     ----------
@@ -288,18 +289,20 @@ class LosModel:
             self.w1, self.w2 = kernels.spline_at(t, gyro, *gauss_points(t))
         else:
             spline = rate_spline(t, gyro, gyro_sampling)
-            self.w1, self.w2 = (np.ascontiguousarray(spline(g)) for g in gauss_points(t))
-        self.trig = [f(np.asarray(a, float)) for a in (eta, eps) for f in (np.cos, np.sin)]
+            self.w1, self.w2 = (np.ascontiguousarray(np.moveaxis(spline(g), 0, -1))
+                                for g in gauss_points(t))
+        self.trig = [f(np.ascontiguousarray(np.asarray(a, float).T))
+                     for a in (eta, eps) for f in (np.cos, np.sin)]
         self.k_x, self.k_z = float(camera.k_x), float(camera.k_z)
         self.shape = np.shape(eta)
         self.inner = check_mount(mount) == "inner-gimbal"
         self.camera_columns = (0, 3, 4, 8) if self.inner else (0, 3, 4)
 
     def _pixels(self, sets: FloatArray, aims: FloatArray, steps: ArrayLike = (0.0,)
-                ) -> FloatArray:
+                ) -> tuple[FloatArray, FloatArray]:
         """Image of the target at parameters ``sets[0]`` (shape (S, B, n)) and aim point
-        ``aims[0]`` (shape (S, B, 2)), and the difference quotients of the other sets, shape
-        (B, N, 2, S)."""
+        ``aims[0]`` (shape (S, B, 2)), shape (B, N, 2), and the difference quotients of the
+        other sets, shape (B, N, 2, S - 1)."""
         C_bg = mounting_matrix(0.0, sets[..., 1], sets[..., 2])  # seed 001, eq. (1), dgz = 0
         zero = np.zeros(sets.shape[:-1])
         if self.inner:  # camera_matrix(eta - dgz, eps, [dpx, dpy, delta_z + dgz], inner)
@@ -315,21 +318,21 @@ class LosModel:
             moved = np.any(sets[..., list(columns)] != sets[:1, ..., list(columns)], axis=(1, 2))
             return np.where(moved, np.arange(len(sets)), 0)
 
-        out = np.empty((*self.shape, 2, len(sets)))
+        out = np.empty((*self.shape, 2))
+        diff = np.empty((*self.shape, 2, len(sets) - 1))
         kernels.predicted_pixels(self.h, self.w1, self.w2,
                                  np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
                                  np.ascontiguousarray(sets[..., 5:8]),
                                  first_equal(self.ATTITUDE), *self.trig,
                                  np.ascontiguousarray(install), np.ascontiguousarray(offsets),
                                  first_equal(self.camera_columns), np.ascontiguousarray(aims),
-                                 self.k_x, self.k_z, np.asarray(steps, float), out)
-        return out
+                                 self.k_x, self.k_z, np.asarray(steps, float), out, diff)
+        return out, diff
 
     def predict(self, params: ArrayLike, aim_px: ArrayLike) -> FloatArray:
         """:func:`predict_los` at ``params`` (shape (B, n)) and ``aim_px`` (shape (B, 2)),
         shape (B, N, 2) [px]."""
-        return self._pixels(np.asarray(params, float)[None], np.asarray(aim_px, float)[None])[
-            ..., 0]
+        return self._pixels(np.asarray(params, float)[None], np.asarray(aim_px, float)[None])[0]
 
     def predict_and_jacobian(self, params: ArrayLike, aim_px: ArrayLike, columns: str = "all"
                              ) -> tuple[FloatArray, FloatArray]:
@@ -349,8 +352,7 @@ class LosModel:
             sets[1 + j, :, j] += steps[1 + j]
         for j in range(len(steps) - 1 - n_moved):
             aims[1 + n_moved + j, :, j] += AIM_STEP
-        out = self._pixels(sets, aims, steps)
-        return out[..., 0], out[..., 1:]
+        return self._pixels(sets, aims, steps)
 
 
 def recursive_least_squares(
@@ -598,7 +600,7 @@ def estimate(
         def rls(rows, obs, prior_mean):
             p = rows.shape[-1]
             rows = flat_batch(rows, batch, (n_t, 2, p))
-            transition = kernels.walk_transition(np.ascontiguousarray(rows[..., n_par:]))
+            transition = kernels.walk_transition(rows[..., n_par:])
             x, P = kernels.rls_pass(rows, flat_batch(obs, batch, (n_t, 2)),
                                     flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
                                     image_noise**2, forgetting, transition, walk_flat)

@@ -18,10 +18,12 @@ and is tested equal to it to about 1e-12 on the same inputs:
   and :func:`walk_transition` - the turn of its random walk;
 * :func:`rk4_gimbal` - :func:`montecarlo.seed001.simulate.integrate_gimbal`.
 
-Arrays have one batch axis (trials) first; callers flatten theirs. Per-step matrices are kept in
-registers, never stored: arrays of them for a batch of runs take tens of MB, and touching fresh
-memory costs more than the arithmetic. No fastmath: the kernels keep IEEE arithmetic and differ
-from the numpy path only in the order of operations.
+Arrays have one batch axis (trials), first unless a kernel says otherwise; callers flatten
+theirs. Per-step matrices are never stored for the whole run: arrays of them for a batch of runs
+take tens of MB, and touching fresh memory costs more than the arithmetic (the current step's,
+for all runs of a batch, fit in the processor's cache). No fastmath: the kernels keep IEEE
+arithmetic and differ from the numpy path only in the order of operations and, in
+:func:`rk4_gimbal`, in cosines and sines of small turns by their series.
 
 References
 ----------
@@ -56,7 +58,8 @@ def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
 
     Returns
     -------
-    ndarray, shape (B, N - 1, c), twice
+    ndarray, shape (N - 1, c, B), twice
+        Trials last, as :func:`predicted_pixels` takes them.
     """
     n_b, n, n_c = y.shape[0], y.shape[1], y.shape[2]
     dx = np.diff(t)
@@ -67,7 +70,7 @@ def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
     lower[n - 1], diag[n - 1] = t[n - 1] - t[n - 3], dx[n - 3]
     d0, d1 = t[2] - t[0], t[n - 1] - t[n - 3]
     slope, rhs, c_up, s = np.empty(n - 1), np.empty(n), np.empty(n), np.empty(n)
-    out1, out2 = np.empty((n_b, n - 1, n_c)), np.empty((n_b, n - 1, n_c))
+    out1, out2 = np.empty((n - 1, n_c, n_b)), np.empty((n - 1, n_c, n_b))
     for b in range(n_b):
         for c in range(n_c):
             for i in range(n - 1):
@@ -90,47 +93,31 @@ def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
                 p0, p1, p2, p3 = tt / dx[i], (slope[i] - s[i]) / dx[i] - tt, s[i], y[b, i, c]
                 for g, out in ((g1[i], out1), (g2[i], out2)):
                     z = g - t[i]
-                    out[b, i, c] = p3 + p2 * z + p1 * (z * z) + p0 * (z * z * z)
+                    out[i, c, b] = p3 + p2 * z + p1 * (z * z) + p0 * (z * z * z)
     return out1, out2
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _magnus_step(h, w1, w2, T, bias):  # pragma: no cover - compiled
-    """Rotation matrix (9 entries, row by row) of one step of :func:`predicted_pixels`."""
-    u0, u1, u2 = w1[0] - bias[0], w1[1] - bias[1], w1[2] - bias[2]
-    x0 = T[0, 0] * u0 + T[0, 1] * u1 + T[0, 2] * u2
-    x1 = T[1, 0] * u0 + T[1, 1] * u1 + T[1, 2] * u2
-    x2 = T[2, 0] * u0 + T[2, 1] * u1 + T[2, 2] * u2
-    u0, u1, u2 = w2[0] - bias[0], w2[1] - bias[1], w2[2] - bias[2]
-    y0 = T[0, 0] * u0 + T[0, 1] * u1 + T[0, 2] * u2
-    y1 = T[1, 0] * u0 + T[1, 1] * u1 + T[1, 2] * u2
-    y2 = T[2, 0] * u0 + T[2, 1] * u1 + T[2, 2] * u2
-    hh, cc = 0.5 * h, np.sqrt(3.0) / 12.0 * (h * h)
-    vx = hh * (x0 + y0) + cc * (x1 * y2 - x2 * y1)
-    vy = hh * (x1 + y1) + cc * (x2 * y0 - x0 * y2)
-    vz = hh * (x2 + y2) + cc * (x0 * y1 - x1 * y0)
-    a2 = vx * vx + vy * vy + vz * vz
-    if a2 < SERIES_ANGLE_SQ:
-        scale = 0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 + a2 * (
-            -1.0 / 645120.0 + a2 / 185794560.0)))
-        qw = 1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 + a2 * (
-            -1.0 / 46080.0 + a2 / 10321920.0)))
-    else:
-        angle = np.sqrt(a2)
-        scale = np.sin(0.5 * angle) / angle
-        qw = np.cos(0.5 * angle)
-    qx, qy, qz = scale * vx, scale * vy, scale * vz
-    return (qx * qx - qy * qy - qz * qz + qw * qw, 2.0 * (qx * qy - qz * qw),
-            2.0 * (qx * qz + qy * qw), 2.0 * (qx * qy + qz * qw),
-            -qx * qx + qy * qy - qz * qz + qw * qw, 2.0 * (qy * qz - qx * qw),
-            2.0 * (qx * qz - qy * qw), 2.0 * (qy * qz + qx * qw),
-            -qx * qx - qy * qy + qz * qz + qw * qw)
+def _magnus_vector(hh, cc, wa, wb, T, bias, b):  # pragma: no cover - compiled
+    """Rotation vector of one step of run ``b`` in :func:`predicted_pixels`: ``hh (r1 + r2)
+    + cc r1 x r2`` with ``r = T (w - bias)`` (all arrays with the runs last)."""
+    u0, u1, u2 = wa[0, b] - bias[0, b], wa[1, b] - bias[1, b], wa[2, b] - bias[2, b]
+    x0 = T[0, b] * u0 + T[1, b] * u1 + T[2, b] * u2
+    x1 = T[3, b] * u0 + T[4, b] * u1 + T[5, b] * u2
+    x2 = T[6, b] * u0 + T[7, b] * u1 + T[8, b] * u2
+    u0, u1, u2 = wb[0, b] - bias[0, b], wb[1, b] - bias[1, b], wb[2, b] - bias[2, b]
+    y0 = T[0, b] * u0 + T[1, b] * u1 + T[2, b] * u2
+    y1 = T[3, b] * u0 + T[4, b] * u1 + T[5, b] * u2
+    y2 = T[6, b] * u0 + T[7, b] * u1 + T[8, b] * u2
+    return (hh * (x0 + y0) + cc * (x1 * y2 - x2 * y1),
+            hh * (x1 + y1) + cc * (x2 * y0 - x0 * y2),
+            hh * (x2 + y2) + cc * (x0 * y1 - x1 * y0))
 
 
 @nb.njit(cache=True, nogil=True)
 def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_eps, s_eps,
-                     installation, offsets, camera_of, aim, k_x, k_z, steps,
-                     out):  # pragma: no cover - compiled
+                     installation, offsets, camera_of, aim, k_x, k_z, steps, out,
+                     diff):  # pragma: no cover - compiled
     """Image of a fixed target imaged at ``aim`` at ``t_0``, for several sets of parameters.
 
     The carrier's attitude ``R_k = C_{b_k}^{b_0}`` is the prefix product of the steps'
@@ -142,21 +129,25 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
     ``[dz, dpx]``; inner-gimbal mount: ``M = R_y(dpy) R_x(dpx) R_z(dpz)``, offsets
     ``[-dgz, 0]``). The target is ``C_0^T d`` with ``d`` the pinhole's direction of ``aim``,
     its direction ``u_k = C_k R_k^T target`` and its image ``x = [k_x u_x / u_y,
-    k_z u_z / u_y]``. The sets' attitudes advance together, one step for all (independent
-    chains keep the processor busy).
+    k_z u_z / u_y]``.
+
+    All runs of the batch advance together, one step for all: the innermost loops run over the
+    runs (trials last in the time series and in the kernel's own state), so the processor
+    computes several runs with one vector instruction. A step angle above
+    ``sqrt(SERIES_ANGLE_SQ)`` takes sine and cosine in a second, scalar loop.
 
     Parameters
     ----------
     h : ndarray, shape (N - 1,) [s]
         Step lengths.
-    w1, w2 : ndarray, shape (B, N - 1, 3) [rad/s]
-        Rate at ``t_mid -/+ h sqrt(3)/6`` of each step.
+    w1, w2 : ndarray, shape (N - 1, 3, B) [rad/s]
+        Rate at ``t_mid -/+ h sqrt(3)/6`` of each step (:func:`spline_at`).
     transform : ndarray, shape (S, B, 3, 3)
     bias : ndarray, shape (S, B, 3) [rad/s]
     attitude_of : ndarray of int, shape (S,)
         Set whose attitude set ``s`` uses (``s`` itself, or an earlier set with the same
         transform and bias).
-    c_eta, s_eta, c_eps, s_eps : ndarray, shape (B, N)
+    c_eta, s_eta, c_eps, s_eps : ndarray, shape (N, B)
         Cosines and sines of the gimbal angles (the camera's angles follow by the sum formulas).
     installation : ndarray, shape (S, B, 3, 3)
         ``M`` of each set.
@@ -170,79 +161,131 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
     k_x, k_z : float [px]
     steps : ndarray, shape (S,)
         0 for set 0; else set ``s`` gives the forward difference ``(x_s - x_0) / step_s``.
-    out : ndarray, shape (B, N, 2, S)
-        Filled with the image of set 0 [px] and the differences of the others.
+    out : ndarray, shape (B, N, 2)
+        Filled with the image of set 0 [px].
+    diff : ndarray, shape (B, N, 2, S - 1)
+        Filled with the forward differences of the other sets (contiguous, as
+        :func:`rls_pass` reads its rows fastest that way).
 
     References
     ----------
     seed 001, eqs. (1)-(2).
     """
-    n_s = offsets.shape[0]
-    trig = np.empty((n_s, 4))
-    target = np.empty((n_s, 3))
-    R = np.empty((n_s, 9))
-    C = np.empty((n_s, 9))
-    for b in range(out.shape[0]):
-        for i in range(n_s):
+    n_s, n_b, n = offsets.shape[0], out.shape[0], out.shape[1]
+    T = np.empty((n_s, 9, n_b))
+    bs = np.empty((n_s, 3, n_b))
+    M = np.empty((n_s, 9, n_b))
+    tr = np.empty((n_s, 4, n_b))
+    target = np.empty((n_s, 3, n_b))
+    R = np.empty((n_s, 9, n_b))
+    C = np.empty((n_s, 9, n_b))
+    q = np.empty((4, n_b))  # quaternion of each run's step
+    x0 = np.empty(n_b)
+    z0 = np.empty(n_b)
+    c0 = np.sqrt(3.0) / 12.0
+    for i in range(n_s):
+        for b in range(n_b):
+            for r in range(3):
+                bs[i, r, b] = bias[i, b, r]
+                for c in range(3):
+                    T[i, 3 * r + c, b] = transform[i, b, r, c]
+                    M[i, 3 * r + c, b] = installation[i, b, r, c]
             for j in range(2):
-                trig[i, 2 * j] = np.cos(offsets[i, b, j])
-                trig[i, 2 * j + 1] = np.sin(offsets[i, b, j])
+                tr[i, 2 * j, b] = np.cos(offsets[i, b, j])
+                tr[i, 2 * j + 1, b] = np.sin(offsets[i, b, j])
             for j in range(9):
-                R[i, j] = 1.0 if j % 4 == 0 else 0.0
-        for k in range(out.shape[1]):
-            if k > 0:
-                for i in range(n_s):
-                    if attitude_of[i] != i:
-                        continue
-                    s00, s01, s02, s10, s11, s12, s20, s21, s22 = _magnus_step(
-                        h[k - 1], w1[b, k - 1], w2[b, k - 1], transform[i, b], bias[i, b])
-                    for r in range(3):
-                        a0, a1, a2 = R[i, 3 * r], R[i, 3 * r + 1], R[i, 3 * r + 2]
-                        R[i, 3 * r] = a0 * s00 + a1 * s10 + a2 * s20
-                        R[i, 3 * r + 1] = a0 * s01 + a1 * s11 + a2 * s21
-                        R[i, 3 * r + 2] = a0 * s02 + a1 * s12 + a2 * s22
+                R[i, j, b] = 1.0 if j % 4 == 0 else 0.0
+    for k in range(n):
+        if k > 0:
+            hk = h[k - 1]
+            hh, cc = 0.5 * hk, c0 * (hk * hk)
+            wa, wb = w1[k - 1], w2[k - 1]
             for i in range(n_s):
-                if camera_of[i] != i:
+                if attitude_of[i] != i:
                     continue
-                ca_o, sa_o, ce_o, se_o = trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3]
-                cp = c_eta[b, k] * ca_o - s_eta[b, k] * sa_o  # camera azimuth eta + o_eta
-                sp = s_eta[b, k] * ca_o + c_eta[b, k] * sa_o
-                ct = c_eps[b, k] * ce_o - s_eps[b, k] * se_o  # camera pitch eps + o_eps
-                st = s_eps[b, k] * ce_o + c_eps[b, k] * se_o
-                g0, g1, g2 = cp, sp, 0.0  # R_x(pitch) R_z(azimuth), row by row
+                Ti, bi, Ri = T[i], bs[i], R[i]
+                big = False
+                for b in range(n_b):
+                    vx, vy, vz = _magnus_vector(hh, cc, wa, wb, Ti, bi, b)
+                    a2 = vx * vx + vy * vy + vz * vz
+                    scale = 0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 + a2 * (
+                        -1.0 / 645120.0 + a2 / 185794560.0)))
+                    q[3, b] = 1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 + a2 * (
+                        -1.0 / 46080.0 + a2 / 10321920.0)))
+                    q[0, b], q[1, b], q[2, b] = scale * vx, scale * vy, scale * vz
+                    big |= a2 >= SERIES_ANGLE_SQ
+                if big:  # sine and cosine where the series is not exact
+                    for b in range(n_b):
+                        vx, vy, vz = _magnus_vector(hh, cc, wa, wb, Ti, bi, b)
+                        a2 = vx * vx + vy * vy + vz * vz
+                        if a2 >= SERIES_ANGLE_SQ:
+                            angle = np.sqrt(a2)
+                            scale = np.sin(0.5 * angle) / angle
+                            q[3, b] = np.cos(0.5 * angle)
+                            q[0, b], q[1, b], q[2, b] = scale * vx, scale * vy, scale * vz
+                for b in range(n_b):
+                    qx, qy, qz, qw = q[0, b], q[1, b], q[2, b], q[3, b]
+                    s00 = qx * qx - qy * qy - qz * qz + qw * qw
+                    s01 = 2.0 * (qx * qy - qz * qw)
+                    s02 = 2.0 * (qx * qz + qy * qw)
+                    s10 = 2.0 * (qx * qy + qz * qw)
+                    s11 = -qx * qx + qy * qy - qz * qz + qw * qw
+                    s12 = 2.0 * (qy * qz - qx * qw)
+                    s20 = 2.0 * (qx * qz - qy * qw)
+                    s21 = 2.0 * (qy * qz + qx * qw)
+                    s22 = -qx * qx - qy * qy + qz * qz + qw * qw
+                    for r in range(3):
+                        a0, a1, a2 = Ri[3 * r, b], Ri[3 * r + 1, b], Ri[3 * r + 2, b]
+                        Ri[3 * r, b] = a0 * s00 + a1 * s10 + a2 * s20
+                        Ri[3 * r + 1, b] = a0 * s01 + a1 * s11 + a2 * s21
+                        Ri[3 * r + 2, b] = a0 * s02 + a1 * s12 + a2 * s22
+        ce_, se_, ca_, sa_ = c_eta[k], s_eta[k], c_eps[k], s_eps[k]
+        for i in range(n_s):
+            if camera_of[i] != i:
+                continue
+            tri, Mi, Ci = tr[i], M[i], C[i]
+            for b in range(n_b):
+                ca_o, sa_o, ce_o, se_o = tri[0, b], tri[1, b], tri[2, b], tri[3, b]
+                cp = ce_[b] * ca_o - se_[b] * sa_o
+                sp = se_[b] * ca_o + ce_[b] * sa_o
+                ct = ca_[b] * ce_o - sa_[b] * se_o
+                st = sa_[b] * ce_o + ca_[b] * se_o
+                g0, g1, g2 = cp, sp, 0.0
                 g3, g4, g5 = -ct * sp, ct * cp, st
                 g6, g7, g8 = st * sp, -st * cp, ct
-                M = installation[i, b]
                 for r in range(3):
-                    m0, m1, m2 = M[r, 0], M[r, 1], M[r, 2]
-                    C[i, 3 * r] = m0 * g0 + m1 * g3 + m2 * g6
-                    C[i, 3 * r + 1] = m0 * g1 + m1 * g4 + m2 * g7
-                    C[i, 3 * r + 2] = m0 * g2 + m1 * g5 + m2 * g8
-            if k == 0:
-                for i in range(n_s):
-                    Ci = C[camera_of[i]]
+                    m0, m1, m2 = Mi[3 * r, b], Mi[3 * r + 1, b], Mi[3 * r + 2, b]
+                    Ci[3 * r, b] = m0 * g0 + m1 * g3 + m2 * g6
+                    Ci[3 * r + 1, b] = m0 * g1 + m1 * g4 + m2 * g7
+                    Ci[3 * r + 2, b] = m0 * g2 + m1 * g5 + m2 * g8
+        if k == 0:
+            for i in range(n_s):
+                Ci = C[camera_of[i]]
+                for b in range(n_b):
                     d0, d2 = aim[i, b, 0] / k_x, aim[i, b, 1] / k_z
                     norm = np.sqrt(d0 * d0 + 1.0 + d2 * d2)
                     d0, d1, d2 = d0 / norm, 1.0 / norm, d2 / norm
-                    target[i, 0] = Ci[0] * d0 + Ci[3] * d1 + Ci[6] * d2  # C_0^T d
-                    target[i, 1] = Ci[1] * d0 + Ci[4] * d1 + Ci[7] * d2
-                    target[i, 2] = Ci[2] * d0 + Ci[5] * d1 + Ci[8] * d2
-            x0 = z0 = 0.0
-            for i in range(n_s):
-                Ci, t = C[camera_of[i]], target[i]
-                Ri = R[attitude_of[i]]
-                v0 = Ri[0] * t[0] + Ri[3] * t[1] + Ri[6] * t[2]  # R_k^T target
-                v1 = Ri[1] * t[0] + Ri[4] * t[1] + Ri[7] * t[2]
-                v2 = Ri[2] * t[0] + Ri[5] * t[1] + Ri[8] * t[2]
-                u0 = Ci[0] * v0 + Ci[1] * v1 + Ci[2] * v2
-                u1 = Ci[3] * v0 + Ci[4] * v1 + Ci[5] * v2
-                u2 = Ci[6] * v0 + Ci[7] * v1 + Ci[8] * v2
+                    target[i, 0, b] = Ci[0, b] * d0 + Ci[3, b] * d1 + Ci[6, b] * d2
+                    target[i, 1, b] = Ci[1, b] * d0 + Ci[4, b] * d1 + Ci[7, b] * d2
+                    target[i, 2, b] = Ci[2, b] * d0 + Ci[5, b] * d1 + Ci[8, b] * d2
+        for i in range(n_s):
+            Ci, Ri, ti = C[camera_of[i]], R[attitude_of[i]], target[i]
+            st_i = steps[i]
+            for b in range(n_b):
+                t0, t1, t2 = ti[0, b], ti[1, b], ti[2, b]
+                v0 = Ri[0, b] * t0 + Ri[3, b] * t1 + Ri[6, b] * t2
+                v1 = Ri[1, b] * t0 + Ri[4, b] * t1 + Ri[7, b] * t2
+                v2 = Ri[2, b] * t0 + Ri[5, b] * t1 + Ri[8, b] * t2
+                u0 = Ci[0, b] * v0 + Ci[1, b] * v1 + Ci[2, b] * v2
+                u1 = Ci[3, b] * v0 + Ci[4, b] * v1 + Ci[5, b] * v2
+                u2 = Ci[6, b] * v0 + Ci[7, b] * v1 + Ci[8, b] * v2
                 x, z = k_x * u0 / u1, k_z * u2 / u1
                 if i == 0:
-                    x0, z0 = x, z
+                    x0[b], z0[b] = x, z
+                    out[b, k, 0], out[b, k, 1] = x, z
                 else:
-                    x, z = (x - x0) / steps[i], (z - z0) / steps[i]
-                out[b, k, 0, i], out[b, k, 1, i] = x, z
+                    diff[b, k, 0, i - 1] = (x - x0[b]) / st_i
+                    diff[b, k, 1, i - 1] = (z - z0[b]) / st_i
 
 
 @nb.njit(cache=True, nogil=True)
@@ -537,11 +580,28 @@ def drift_rows(t, gyro, eta, eps, k_x, k_z):  # pragma: no cover - compiled
     return out
 
 
-@nb.njit(cache=True, nogil=True)
-def _gimbal_rates(wx, wy, wz, eta, eps):  # pragma: no cover - compiled
-    """(eta', eps') of seed 001, eq. (4); see :func:`montecarlo.seed001.kinematics.gimbal_rates`."""
-    ce, se, ca, sa = np.cos(eps), np.sin(eps), np.cos(eta), np.sin(eta)
+@nb.njit(cache=True, nogil=True, inline="always")
+def _gimbal_rates(wx, wy, wz, ca, sa, ce, se):  # pragma: no cover - compiled
+    """(eta', eps') of seed 001, eq. (4), from the cosines and sines of eta and eps; see
+    :func:`montecarlo.seed001.kinematics.gimbal_rates`."""
     return (-se * sa * wx + se * ca * wy - ce * wz) / ce, -ca * wx - sa * wy
+
+
+SMALL_TURN = 0.01
+"""Below this turn [rad] :func:`_turned` takes its cosine and sine from their Taylor series
+(terms up to the 8th power; the first omitted term is below 3e-24)."""
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _turned(c, s, d, angle):  # pragma: no cover - compiled
+    """Cosine and sine of ``angle = a + d`` from those of ``a`` (``c``, ``s``) by the sum
+    formulas, or directly when the turn ``d`` [rad] is not small."""
+    if abs(d) < SMALL_TURN:
+        d2 = d * d
+        sd = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0))))
+        cd = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 / 40320.0)))
+        return c * cd - s * sd, s * cd + c * sd
+    return np.cos(angle), np.sin(angle)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -550,7 +610,8 @@ def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_e
     """Gimbal angles of eq. (4) integrated by the classical Runge-Kutta method.
 
     The loop's rate is ``transform_b (rate - bias_b) + transform_b noise_k``: the rate sampled at
-    the steps and their mid-points, white noise held over each step.
+    the steps and their mid-points, white noise held over each step. Each step takes the cosines
+    and sines of its first stage's angles; its later stages turn them (:func:`_turned`).
 
     Parameters
     ----------
@@ -590,12 +651,18 @@ def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_e
                     w[s, i] = ((T[i, 0] * r0 + T[i, 1] * r1 + T[i, 2] * r2)
                                + (T[i, 0] * n0 + T[i, 1] * n1 + T[i, 2] * n2))
             hk = h[k]
-            a1, b1 = _gimbal_rates(w[0, 0], w[0, 1], w[0, 2], e + oe, p + op)
-            a2, b2 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a1 + oe,
-                                   p + 0.5 * hk * b1 + op)
-            a3, b3 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], e + 0.5 * hk * a2 + oe,
-                                   p + 0.5 * hk * b2 + op)
-            a4, b4 = _gimbal_rates(w[2, 0], w[2, 1], w[2, 2], e + hk * a3 + oe, p + hk * b3 + op)
+            ea, pa = e + oe, p + op  # eq. (4) at the stages' angles; the three later stages
+            ca, sa, ce, se = np.cos(ea), np.sin(ea), np.cos(pa), np.sin(pa)  # turn the first
+            a1, b1 = _gimbal_rates(w[0, 0], w[0, 1], w[0, 2], ca, sa, ce, se)
+            ca2, sa2 = _turned(ca, sa, 0.5 * hk * a1, e + 0.5 * hk * a1 + oe)
+            ce2, se2 = _turned(ce, se, 0.5 * hk * b1, p + 0.5 * hk * b1 + op)
+            a2, b2 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], ca2, sa2, ce2, se2)
+            ca3, sa3 = _turned(ca, sa, 0.5 * hk * a2, e + 0.5 * hk * a2 + oe)
+            ce3, se3 = _turned(ce, se, 0.5 * hk * b2, p + 0.5 * hk * b2 + op)
+            a3, b3 = _gimbal_rates(w[1, 0], w[1, 1], w[1, 2], ca3, sa3, ce3, se3)
+            ca4, sa4 = _turned(ca, sa, hk * a3, e + hk * a3 + oe)
+            ce4, se4 = _turned(ce, se, hk * b3, p + hk * b3 + op)
+            a4, b4 = _gimbal_rates(w[2, 0], w[2, 1], w[2, 2], ca4, sa4, ce4, se4)
             e = e + hk / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
             p = p + hk / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
             eta[b, k + 1], eps[b, k + 1] = e, p

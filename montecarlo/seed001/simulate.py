@@ -264,8 +264,17 @@ def integrate_gimbal(
     return eta, eps
 
 
+def carrier_trig(rocking_angles: ArrayLike) -> FloatArray:
+    """Cosines and sines ``[c_psi, s_psi, c_theta, s_theta, c_gamma, s_gamma]`` of the carrier's
+    angles ``[psi, theta, gamma]`` (shape (..., N, 3) [rad]), shape (6, ..., N)."""
+    a = np.moveaxis(np.asarray(rocking_angles, float), -1, 0)
+    trig = np.empty((6, *a.shape[1:]))
+    trig[0::2], trig[1::2] = np.cos(a), np.sin(a)  # numpy's cosines and sines are vectorised
+    return trig
+
+
 def target_view_compiled(
-    rocking_angles: ArrayLike, eta: ArrayLike, eps: ArrayLike, delta_p: ArrayLike
+    carrier: ArrayLike, eta: ArrayLike, eps: ArrayLike, delta_p: ArrayLike
 ) -> FloatArray:
     """Direction in the camera of the target the LOS aimed at at ``t[0]``, compiled.
 
@@ -274,8 +283,8 @@ def target_view_compiled(
 
     Parameters
     ----------
-    rocking_angles : array_like, shape (..., N, 3) [rad]
-        Carrier angles ``[psi, theta, gamma]`` (:meth:`Rocking.angles`).
+    carrier : array_like, shape (6, ..., N)
+        :func:`carrier_trig` of the carrier's angles (:meth:`Rocking.angles`).
     eta, eps : array_like, shape (..., N) [rad]
     delta_p : array_like, shape (..., 3) [rad]
 
@@ -287,19 +296,80 @@ def target_view_compiled(
     ----------
     seed 001, eq. (2).
     """
-    rocking_angles, eta, eps = (np.asarray(a, float) for a in (rocking_angles, eta, eps))
+    carrier, eta, eps = (np.asarray(a, float) for a in (carrier, eta, eps))
     delta_p = as_vector(delta_p)
-    shape = np.broadcast_shapes(rocking_angles.shape[:-1], eta.shape, eps.shape,
+    shape = np.broadcast_shapes(carrier.shape[1:], eta.shape, eps.shape,
                                 (*delta_p.shape[:-1], 1))
-    angles = [rocking_angles[..., i] for i in range(3)] + [
-        eta + delta_p[..., 2, None], eps + delta_p[..., 0, None], delta_p[..., 1, None]]
-    trig = np.empty((12, *shape))
-    for i, a in enumerate(angles):  # numpy's cosines and sines are vectorised
-        trig[2 * i], trig[2 * i + 1] = np.cos(a), np.sin(a)
-    trig = trig.reshape(12, -1, shape[-1])
-    u = np.empty((*trig.shape[1:], 3))
-    kernels.target_directions(trig[:6], trig[6:], u)  # seed 001, eq. (2)
+    angles = [eta + delta_p[..., 2, None], eps + delta_p[..., 0, None], delta_p[..., 1, None]]
+    camera = np.empty((6, *shape))
+    for i, a in enumerate(angles):
+        camera[2 * i], camera[2 * i + 1] = np.cos(a), np.sin(a)
+    carrier = np.broadcast_to(carrier, (6, *shape)).reshape(6, -1, shape[-1])
+    u = np.empty((*carrier.shape[1:], 3))
+    kernels.target_directions(np.ascontiguousarray(carrier), camera.reshape(6, -1, shape[-1]),
+                              u)  # seed 001, eq. (2)
     return u.reshape(*shape, 3)
+
+
+@dataclass(frozen=True)
+class Motion:
+    """The carrier's noise-free motion and IMU output in a batch of runs (:func:`imu_motion`).
+
+    Runs with the same rocking, IMU installation angles and gyro bias share it, e.g. a
+    calibration run and its compensated rerun.
+
+    Attributes
+    ----------
+    omega_m : ndarray, shape (..., 2 N - 1, 3) [rad/s]
+        IMU output (eq. (1), without noise) at ``t_0, t_0 + h/2, t_1, ...``.
+    carrier : ndarray, shape (6, ..., N), or None
+        :func:`carrier_trig` of the carrier's angles at the sample times, where
+        :func:`target_view_compiled` uses it (the compiled path, patent mount, target at the
+        centre at ``t = 0``); else None.
+    gyro : ndarray, shape (..., N, 3) [rad/s]
+        The gyro rows without noise: ``omega_m`` at the sample times, or its interval means.
+    """
+
+    omega_m: FloatArray
+    carrier: FloatArray | None
+    gyro: FloatArray
+
+
+def imu_motion(rocking: Rocking, setup: Setup, delta_g: ArrayLike, gyro_bias: ArrayLike = 0.0,
+               reference: bool = False) -> Motion:
+    """The noise-free part of :func:`simulate`: the carrier's rocking and the IMU output.
+
+    ``reference``: the literal numpy functions instead of :func:`kernels.rocking_gyro` (the
+    same results to rounding).
+
+    References
+    ----------
+    seed 001, eq. (1).
+    """
+    t = setup.times
+    h = 1.0 / setup.rate
+    delta_g, bias = as_vector(delta_g), as_vector(gyro_bias)
+    batch = batch_shape(delta_g, bias, rocking.amplitude, rocking.frequency, rocking.phase)
+    t_half = np.sort(np.concatenate([t, t[:-1] + 0.5 * h]))
+    carrier = None
+    if reference:
+        omega_b = rocking.body_rate(t_half)
+        omega_m = measured_rate(omega_b, delta_g[..., None, :], bias[..., None, :])  # eq. (1)
+        omega_m = np.broadcast_to(omega_m, (*batch, t_half.size, 3))
+    else:
+        flat = [flat_batch(a, batch, tail)
+                for a, tail in ((rocking.amplitude, (3,)), (rocking.frequency, (3,)),
+                                (rocking.phase, (3,)), (imu_matrix(delta_g), (3, 3)),
+                                (bias, (3,)))]
+        rock_angles, omega_m = (a.reshape(*batch, t_half.size, 3)
+                                for a in kernels.rocking_gyro(t_half, *flat))  # eq. (1)
+        if setup.mount == "patent" and not np.any(setup.target_px):  # as simulate's image
+            carrier = carrier_trig(rock_angles[..., 0::2, :])
+    if setup.gyro_sampling == "point":
+        gyro = omega_m[..., 0::2, :]
+    else:
+        gyro = interval_mean_rate(rocking, t, h, delta_g, bias)
+    return Motion(omega_m=omega_m, carrier=carrier, gyro=gyro)
 
 
 def simulate(
@@ -311,6 +381,7 @@ def simulate(
     rng: int | np.random.Generator | None = None,
     compensation: Compensation | None = None,
     reference: bool = False,
+    motion: Motion | None = None,
 ) -> Record:
     """Simulate one run (or a batch of runs) with the exact kinematics.
 
@@ -341,6 +412,10 @@ def simulate(
         :func:`kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results to
         rounding). The compiled image covers the patent mount with the target at the centre at
         ``t = 0``; other set-ups use the numpy camera chain either way.
+    motion : Motion or None
+        :func:`imu_motion` of the same rocking, ``delta_g``, ``gyro_bias``, setup and
+        ``reference``, if already computed (e.g. for the calibration run before its
+        compensated rerun); computed here if None.
 
     Returns
     -------
@@ -353,24 +428,14 @@ def simulate(
     """
     rng = np.random.default_rng(rng)
     t = setup.times
-    h = 1.0 / setup.rate
     delta_g, delta_p, bias = (as_vector(x) for x in (delta_g, delta_p, gyro_bias))
     batch = batch_shape(delta_g, delta_p, bias, rocking.amplitude, rocking.frequency,
                          rocking.phase)
 
     # noise-free IMU output at the sample times and at the mid-points of the Runge-Kutta steps
-    t_half = np.sort(np.concatenate([t, t[:-1] + 0.5 * h]))
-    if reference:
-        omega_b = rocking.body_rate(t_half)
-        omega_m = measured_rate(omega_b, delta_g[..., None, :], bias[..., None, :])  # eq. (1)
-        omega_m = np.broadcast_to(omega_m, (*batch, t_half.size, 3))
-    else:
-        flat = [flat_batch(a, batch, tail)
-                for a, tail in ((rocking.amplitude, (3,)), (rocking.frequency, (3,)),
-                                (rocking.phase, (3,)), (imu_matrix(delta_g), (3, 3)),
-                                (bias, (3,)))]
-        rock_angles, omega_m = (a.reshape(*batch, t_half.size, 3)
-                                for a in kernels.rocking_gyro(t_half, *flat))  # eq. (1)
+    if motion is None:
+        motion = imu_motion(rocking, setup, delta_g, bias, reference)
+    omega_m = np.broadcast_to(motion.omega_m, (*batch, 2 * t.size - 1, 3))
     noise = setup.gyro_noise * np.sqrt(setup.rate) * rng.standard_normal((*batch, t.size, 3))
 
     # the rate the loop integrates: measured, or corrected by the compensation
@@ -399,7 +464,7 @@ def simulate(
     else:
         start = (*start, 0.0, 0.0)[:4]
         flat = [flat_batch(a, batch, tail)
-                for a, tail in ((omega_m, (t_half.size, 3)), (noise, (t.size, 3)),
+                for a, tail in ((omega_m, (2 * t.size - 1, 3)), (noise, (t.size, 3)),
                                 (C_gb, (3, 3)), (loop_bias, (3,)), (start[0], ()),
                                 (start[1], ()), (start[2], ()), (start[3], ()))]
         eta, eps = (a.reshape(*batch, t.size)
@@ -416,17 +481,16 @@ def simulate(
         u = matvec(C_nc, target[..., None, :])
         v = matvec(C_nc, C_nc[..., 0:1, 1, :])  # the LOS at t = 0 (row y of C_n^c) in frame c
     else:  # patent mount, target at the centre at t = 0: the target is the LOS at t = 0
-        u = v = target_view_compiled(rock_angles[..., 0::2, :], eta, eps, delta_p)
+        u = v = target_view_compiled(motion.carrier, eta, eps, delta_p)
     x_px, z_px = pixels_from_direction(u, setup.camera)
     los_true = np.stack([x_px, z_px], axis=-1)
     los = los_true + setup.image_noise * rng.standard_normal(los_true.shape)
     los_error = np.arctan2(np.hypot(v[..., 0], v[..., 2]), v[..., 1])
     if setup.gyro_sampling == "point":
-        gyro = omega_m[..., 0::2, :] + noise
+        gyro = motion.gyro + noise
     else:  # the mean over (t_k - h, t_k], with the noise the loop used over that interval
         first = setup.gyro_noise * np.sqrt(setup.rate) * rng.standard_normal((*batch, 1, 3))
-        gyro = interval_mean_rate(rocking, t, h, delta_g, bias) + np.concatenate(
-            [first, noise[..., :-1, :]], axis=-2)
+        gyro = motion.gyro + np.concatenate([first, noise[..., :-1, :]], axis=-2)
     return Record(t=t, gyro=gyro, eta=eta, eps=eps, los_px=los,
                   los_px_true=los_true, los_error=los_error)
 

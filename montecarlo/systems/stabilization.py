@@ -66,7 +66,7 @@ def run_trials(
     magnitudes uniform in ``[misalignment_min, misalignment_max]`` and random signs, a gyro
     bias per axis ~ N(0, gyro_bias), the three rocking phases uniform in [0, 2 pi), and gyro
     and image noise; it simulates the run, estimates, then reruns the same rocking with fresh
-    noise and the estimate compensated.
+    noise and the estimate compensated (the noise-free IMU output is computed once for both).
 
     Parameters
     ----------
@@ -133,12 +133,14 @@ def run_trials(
         part = slice(lo, min(lo + TRIAL_CHUNK, n))
         rocking = Rocking(np.full(3, p["rock_amplitude"]), frequency, phase[part])
         part_setup = dataclasses.replace(setup, target_px=target[part])
+        motion = sim.imu_motion(rocking, part_setup, delta_g[part], bias[part], reference)
         run = sim.simulate(rocking, part_setup, delta_g[part], delta_p[part], bias[part],
-                           sim_rng, reference=reference)
+                           sim_rng, reference=reference, motion=motion)
         est = estimate_record(run, part_setup, forgetting=p["forgetting"],
                               max_passes=int(p["max_passes"]), reference=reference)
         rerun = sim.simulate(rocking, part_setup, delta_g[part], delta_p[part], bias[part],
-                              rerun_rng, compensation=est.compensation(), reference=reference)
+                              rerun_rng, compensation=est.compensation(), reference=reference,
+                              motion=motion)
         chunks.append((est, run.los_error, rerun.los_error))
 
     values = np.concatenate([c[0].values for c in chunks])[:, [0, 1, 2, 3, ROLL]]
