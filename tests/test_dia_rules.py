@@ -380,3 +380,134 @@ def test_the_column_basis_has_the_same_rank_at_any_scale():
         B = engine._orthonormal(scale * M)
         assert B.shape == (N, 2)
         np.testing.assert_allclose(B.T @ B, np.eye(2), atol=1e-9)
+
+
+# --- whole diagnoses ---------------------------------------------------------------------------
+
+
+def alternating(*columns):
+    """A misfit of 1.5 sigma alternating in sign (chi-square about 85), orthogonal to the line
+    and ``columns``: no candidate follows it and no single observation stands out."""
+    m = 1.5 * (-1.0) ** np.arange(N)
+    Q = np.linalg.qr(np.column_stack([ONE, X, *columns]))[0]
+    return m - Q @ (Q.T @ m)
+
+
+def test_a_misfit_no_candidate_explains_ends_with_a_step_that_names_nothing():
+    y = 0.3 + 0.5 * X + alternating(X**2, X**3) + noise(X**2, X**3)
+    d = diagnose(linear(y, CANDIDATES))
+    chi2, *_ = chi2_of(y)
+    assert d.before.chi2 == pytest.approx(chi2, rel=1e-9) and stats.chi2.sf(chi2, N - 2) < 1e-4
+    assert d.detected and d.unexplained and d.named == [] and d.outliers == []
+    [last] = d.steps
+    assert last.fit is d.before and last.fit is d.after
+    assert last.winner is None and last.group == () and last.snoop == [] and last.dropped == {}
+    assert [t.name for t in last.tests] == list(CANDIDATES)
+
+
+def test_a_20_sigma_observation_comes_before_a_10_sigma_effect_it_is_not():
+    """The step's winner is the smallest p-value (the observation, T ~ 400, against the
+    quadratic's ~ 100); the quadratic, fitted instead, leaves the observation 20 sigma off, so it
+    does not take its place. Then the quadratic is named; the final model is lstsq's."""
+    Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    g = X**2 - Q @ (Q.T @ X**2)
+    spike = np.eye(N)[7]
+    y = 0.3 + 0.5 * X + 10.0 * X**2 / np.linalg.norm(g) + 20.0 * spike + noise(X**2, spike)
+    d = diagnose(linear(y, CANDIDATES, observations=True))
+    assert [s.winner for s in d.steps] == ["outlier:P7", "quadratic", None]
+    assert d.named == ["quadratic"] and [t.name for t in d.outliers] == ["outlier:P7"]
+    assert d.after.chi2 == pytest.approx(chi2_of(y, X**2, spike)[0], rel=1e-9)
+
+
+def test_exactly_confounded_candidates_form_a_group_at_the_step_and_in_the_report():
+    """'twin' is the quadratic's column doubled: the two cannot be told apart by any data of
+    this design. Whichever is fitted, the other is its group partner (canonical correlation 1),
+    at the step and in the final report, with no separating data stated; the cubic is not."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2)
+    problem = linear(y, {"quadratic": {"q": X**2}, "cubic": {"c": X**3},
+                         "twin": {"t": 2.0 * X**2}})
+    d = diagnose(problem)
+    [fitted] = d.named
+    other = ({"quadratic", "twin"} - {fitted}).pop()
+    assert d.steps[0].group == (fitted, other) and d.groups == [(fitted, other)]
+    [group] = d.confounded
+    assert group.fitted == fitted and group.members == (fitted, other)
+    assert group.correlation == {other: pytest.approx(1.0, abs=1e-9)}
+    assert group.separating_data == {other: ""}
+    assert other in d.absorbed and "cubic" not in group.members
+
+
+def test_an_absorbed_parameter_stays_out_when_a_second_effect_is_added():
+    """'bend' (its tilt 3 x absorbed by the slope) is named first, the cubic second: the tilt
+    stays out of every refit, and the final model is lstsq's on (1, x, x^2, x^3)."""
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    g = X**3 - Q @ (Q.T @ X**3)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * X**3 / np.linalg.norm(g) + noise(X**2, X**3)
+    d = diagnose(linear(y, {"bend": {"t": 3.0 * X, "w": X**2}, "cubic": {"c": X**3}}))
+    assert d.named == ["bend", "cubic"] and not d.unexplained
+    assert d.after.names == ("a", "b", "w", "c")
+    chi2, coef, _ = chi2_of(y, X**2, X**3)
+    assert d.after.chi2 == pytest.approx(chi2, rel=1e-9)
+    np.testing.assert_allclose(d.after.values, coef, rtol=1e-7)
+
+
+def test_observation_tests_use_the_power_and_absorption_level_given():
+    """Null data, every point an observation. With power 0.5 each observation's lambda0 is the
+    larger of the global test's and its own at alpha / n, both at 50 %; with absorbed = 0.99
+    every observation is absorbed (beside the line none keeps 99 % of its column)."""
+    problem = linear(0.3 + 0.5 * X + noise(), CANDIDATES, observations=True)
+    d = diagnose(problem, power=0.5)
+    snoop = d.steps[0].snoop
+    assert d.named == [] and len(snoop) == N and all(t.status == "testable" for t in snoop)
+    lam0 = max(engine.noncentrality(0.01, N - 2, 0.5), engine.noncentrality(0.01 / N, 1, 0.5))
+    assert all(t.lambda0 == pytest.approx(lam0, rel=1e-12) for t in snoop)
+    d = diagnose(problem, absorbed=0.99)
+    assert all(t.status == "absorbed" for t in d.steps[0].snoop)
+
+
+def stand_in_design():
+    """Orthonormal columns P, Q, R beside the line; data 10 P + 10 Q. S = P + Q/2 + eps R
+    correlates with the data best (named first); with S and Q fitted, P still explains
+    chi-square 4 more (eps chosen for it): too little for a test (chi2_{0.99}(1) = 6.6), enough
+    for Akaike at equal parameter counts."""
+    rng = np.random.default_rng(7)
+    basis = np.linalg.qr(np.column_stack([ONE, X, rng.standard_normal((N, 3))]))[0]
+    P, Q, R = basis[:, 2], basis[:, 3], basis[:, 4]
+    eps = math.sqrt(1.0 / 24.0)  # eps^2 / (1 + eps^2) * 10^2 = 4
+    S = P + 0.5 * Q + eps * R
+    y = 0.3 + 0.5 * X + 10.0 * P + 10.0 * Q + noise(P, Q, R, seed=3)
+    return y, {"S": {"s": S}, "P": {"p": P}, "Q": {"q": Q}}
+
+
+def test_an_effect_that_stood_in_for_another_is_swapped_for_it_at_the_end():
+    y, candidates = stand_in_design()
+    d = diagnose(linear(y, candidates))
+    P, Q = candidates["P"]["p"], candidates["Q"]["q"]
+    chi2, coef, cov = chi2_of(y, P, Q)
+    assert d.steps[0].winner == "S"
+    assert sorted(d.named) == ["P", "Q"] and not d.unexplained
+    [(out, into, before, after)] = d.swaps
+    assert (out, into) == ("S", "P")
+    assert before - after == pytest.approx(4.0, rel=1e-6)
+    assert after == pytest.approx(aic(chi2, 4), rel=1e-9)
+    result = d.effect_result("P")
+    T = coef[2] ** 2 / cov[2, 2]
+    assert result["swapped_in"] is True
+    assert result["statistic"] == pytest.approx(T, rel=1e-6)
+    assert result["p_value"] == pytest.approx(stats.chi2.sf(T, 1), rel=1e-6)
+
+
+def test_an_effect_replaces_flagged_observations_also_when_a_misfit_remains():
+    """The kink design plus a misfit no candidate follows: after both observations are flagged
+    the global test still fails and nothing is significant; before stopping, the kink is tried
+    instead of the two shifts, and it is named. The misfit stays: unexplained."""
+    kink, _, _, u = kink_problem()
+    m = alternating(u, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+    problem = Problem(kink.system, kink.base, kink.candidates,
+                      lambda v: kink.residuals(v) + m, kink.start,
+                      observations=kink.observations)
+    d = diagnose(problem)
+    assert d.named == ["kink"] and d.outliers == [] and d.unexplained
+    assert d.steps[2].winner == "kink" and d.steps[2].fit.p_value < 0.01  # misfit with both
+    assert sorted(d.dropped) == sorted([f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"])
+    assert d.steps[-1].winner is None and d.steps[-1].fit is d.after
