@@ -76,16 +76,23 @@ def test_one_effect_replaces_flagged_shifts_only_where_akaike_prefers_it(left, r
     d = math.sqrt(left) / np.linalg.norm(gap - Q @ (Q.T @ gap))
     y = 0.3 + 0.5 * X + 5.0 * X**2 + 10.0 * ENDS + d * gap \
         + noise(X**2, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+    weak = ENDS + 0.1 * np.eye(N)[20]  # also fits, a little worse: 'ends' is the better one
     problem = with_outliers(linear(y, {"quadratic": {"q": X**2}, "bow": {"w": X**4},
+                                       "slope": {"s": 2.0 * X}, "weak": {"k": weak},
                                        "ends": {"e": ENDS}}, observations=True))
     flagged = [f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"]
     fit = fit_model(problem, ("quadratic", *flagged))
     with_shifts, *_ = chi2_of(y, X**2, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
     with_ends, coef, _ = chi2_of(y, X**2, ENDS)
+    with_weak, *_ = chi2_of(y, X**2, weak)
     assert fit.chi2 == pytest.approx(with_shifts, rel=1e-9)
     assert with_ends - with_shifts == pytest.approx(left, rel=1e-9)
-    got = engine._effect_for_outliers(problem, fit, flagged, ["bow", "ends"], set())
+    assert with_ends < with_weak
+    # 'slope' cannot be fitted beside the line (skipped); the others in this order
+    got = engine._effect_for_outliers(problem, fit, flagged, ["bow", "slope", "weak", "ends"],
+                                      set())
     assert bool(aic(with_ends, 4) < aic(with_shifts, 5)) is replaced
+    assert bool(aic(with_weak, 4) < aic(with_shifts, 5)) is replaced
     if not replaced:
         assert got is None
         return
@@ -190,6 +197,29 @@ def test_a_swap_adding_parameters_needs_the_chi2_test_of_the_extra_ones(drop, sw
     final, swaps = engine._swap(problem, fit, ["quadratic"], ["wide"], set())
     assert [s[:2] for s in swaps] == ([("quadratic", "wide")] if swapped else [])
     assert final.effects == ("line", "wide" if swapped else "quadratic")
+
+
+def test_every_candidate_is_tried_and_the_lowest_criterion_wins():
+    """Named: the quadratic, where the data are 5 x^2 plus a cubic part worth chi-square 4.
+    Offered in order: the slope's column (cannot be fitted), 'wide' (adds a parameter for 4 of
+    chi-square: refused by the chi2(1) test), a rough one-parameter column and the exact one.
+    Both lower Akaike's criterion; the exact one (by 4) is taken."""
+    Q3 = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    cubic = X**3 - Q3 @ (Q3.T @ X**3)
+    cubic *= 2.0 / np.linalg.norm(cubic)
+    exact, rough = 5.0 * X**2 + cubic, 5.0 * X**2 + 0.5 * cubic
+    y = 0.3 + 0.5 * X + exact + noise(X**2, X**3)
+    problem = linear(y, {**CANDIDATES, "slope": {"s": 2.0 * X}, "rough": {"r": rough},
+                         "exact": {"e": exact}})
+    fit = fit_model(problem, ("quadratic",))
+    chi2 = {n: chi2_of(y, col)[0] for n, col in (("quadratic", X**2), ("rough", rough),
+                                                  ("exact", exact))}
+    assert chi2["exact"] < chi2["rough"] < chi2["quadratic"]
+    assert chi2["quadratic"] - chi2["exact"] == pytest.approx(4.0, rel=1e-9)
+    final, swaps = engine._swap(problem, fit, ["quadratic"], ["slope", "wide", "rough", "exact"],
+                                set())
+    assert [s[:2] for s in swaps] == [("quadratic", "exact")]
+    assert final.chi2 == pytest.approx(chi2["exact"], rel=1e-9)
 
 
 def test_a_candidate_absorbed_by_the_model_replaces_only_an_effect_with_more_parameters():
@@ -511,3 +541,23 @@ def test_an_effect_replaces_flagged_observations_also_when_a_misfit_remains():
     assert d.steps[2].winner == "kink" and d.steps[2].fit.p_value < 0.01  # misfit with both
     assert sorted(d.dropped) == sorted([f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"])
     assert d.steps[-1].winner is None and d.steps[-1].fit is d.after
+
+
+def test_the_group_of_a_later_effect_is_found_with_the_earlier_ones_fitted():
+    """'mix' = x^2 + 2 x^3: once the quadratic is fitted it is the cubic's column doubled (a
+    group partner of whichever of the two is fitted); beside the line alone it correlates with
+    the cubic only 0.71. The final groups are found given the rest of the final model: the
+    quadratic, and the cubic's partner."""
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    g = X**3 - Q @ (Q.T @ X**3)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * X**3 / np.linalg.norm(g) + noise(X**2, X**3)
+    mix = X**2 + 2.0 * X**3
+    d = diagnose(linear(y, {"quadratic": {"q": X**2}, "cubic": {"c": X**3},
+                            "mix": {"m": mix}}))
+    first, second = d.named
+    assert first == "quadratic" and second in ("cubic", "mix")
+    other = ({"cubic", "mix"} - {second}).pop()
+    assert d.groups[1] == (second, other)
+    Q2 = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    a, b = (c - Q2 @ (Q2.T @ c) for c in (X**3, mix))
+    assert abs(a @ b) / np.linalg.norm(a) / np.linalg.norm(b) < 0.75
