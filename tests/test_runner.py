@@ -326,7 +326,8 @@ def test_an_interrupted_run_keeps_finished_points_and_says_how_to_resume(small_s
     with caplog.at_level("WARNING", logger="montecarlo"):
         resumed = run_study(study, options)
     assert resumed.resumed["points"] == [0] and resumed.resumed["key"]
-    assert "small: resuming, 1 of 2 grid points already computed" in caplog.text
+    assert f"small: resuming, 1 of 2 grid points already computed ({tmp_path / 'ck'}" \
+        in caplog.text
     whole = run_study(study, RunOptions(n_jobs=1, progress=False))
     pd.testing.assert_frame_equal(resumed.to_frame(), whole.to_frame(), check_exact=True)
     with pytest.raises(RunInterrupted) as err:  # without checkpoints: nothing to resume from
@@ -429,6 +430,8 @@ def test_two_sweep_keys_and_a_failure_reason_at_some_points_only():
         assert (rows["mounting.psi_deg"] == values["mounting.psi_deg"]).all()
         assert (rows["geometry.H_m"] == values["geometry.H_m"]).all()
     assert frame["invalid_OUTSIDE_FOV"].dtype == np.int64
+    assert frame["invalid_fraction"].dtype == np.float64
+    assert (frame["invalid_fraction"] == frame["invalid"] / frame["trials"]).all()
     assert (frame["invalid_OUTSIDE_FOV"] == frame["invalid"]).all()  # the only reason
     at_30 = frame["mounting.psi_deg"] == 30.0
     assert (frame.loc[at_30, "invalid"] == 0).all() and (frame.loc[~at_30, "invalid"] > 0).all()
