@@ -140,6 +140,7 @@ def test_an_effect_seen_first_as_two_wrong_observations_replaces_them():
     assert [s.winner for s in d.steps] == [*flagged, "kink", None]
     replaced = d.steps[2]
     assert replaced.group == ("kink",)
+    assert [t.name for t in replaced.snoop] == [f"outlier:P{i}" for i in range(N)]
     assert replaced.fit.effects == ("line", *flagged)  # the model whose tests it records
     assert replaced.fit.chi2 == pytest.approx(chi2_of(y, np.eye(N)[A_ROW], np.eye(N)[B_ROW])[0],
                                               rel=1e-9)
@@ -464,7 +465,7 @@ def test_exactly_confounded_candidates_form_a_group_at_the_step_and_in_the_repor
     assert group.fitted == fitted and group.members == (fitted, other)
     assert group.correlation == {other: pytest.approx(1.0, abs=1e-9)}
     assert group.separating_data == {other: ""}
-    assert other in d.absorbed and "cubic" not in group.members
+    assert d.absorbed == [other] and "cubic" not in group.members
 
 
 def test_an_absorbed_parameter_stays_out_when_a_second_effect_is_added():
@@ -541,6 +542,7 @@ def test_an_effect_replaces_flagged_observations_also_when_a_misfit_remains():
     assert d.steps[2].winner == "kink" and d.steps[2].fit.p_value < 0.01  # misfit with both
     assert sorted(d.dropped) == sorted([f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"])
     assert d.steps[-1].winner is None and d.steps[-1].fit is d.after
+    assert [t.name for t in d.steps[-1].snoop] == [f"outlier:P{i}" for i in range(N)]
 
 
 def test_the_group_of_a_later_effect_is_found_with_the_earlier_ones_fitted():
