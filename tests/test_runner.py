@@ -7,6 +7,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -325,7 +326,8 @@ def test_an_interrupted_run_keeps_finished_points_and_says_how_to_resume(small_s
     with caplog.at_level("WARNING", logger="montecarlo"):
         resumed = run_study(study, options)
     assert resumed.resumed["points"] == [0] and resumed.resumed["key"]
-    assert "small: resuming, 1 of 2 grid points already computed" in caplog.text
+    assert f"small: resuming, 1 of 2 grid points already computed ({tmp_path / 'ck'}" \
+        in caplog.text
     whole = run_study(study, RunOptions(n_jobs=1, progress=False))
     pd.testing.assert_frame_equal(resumed.to_frame(), whole.to_frame(), check_exact=True)
     with pytest.raises(RunInterrupted) as err:  # without checkpoints: nothing to resume from
@@ -370,3 +372,291 @@ def test_a_spec_is_judged_in_its_display_unit(tmp_path, factor, verdict):
     assert frame.drop(judged.index)["verdict"].isna().all()
     valid = judged[judged["invalid"] == 0]
     assert (valid["spec_value"] == valid["p95"]).all()
+
+
+def _study(raw, **kw):
+    from montecarlo.systems import study_from_dict
+
+    return study_from_dict(raw, **kw)
+
+
+QUIET = RunOptions(n_jobs=1, progress=False)
+
+SHARP = {
+    "study": {"name": "sharp", "system": "ground", "trials": 200, "seed": 3},
+    "sensor": {"fov_deg": [90.0, 90.0], "pixels": [512, 512]},
+    "mounting": {"psi_deg": 30.0, "theta_deg": 20.0, "gamma_deg": 10.0},
+    "geometry": {"L_m": 50.0, "H_m": 1.0},
+    "errors": {"dx_m": 0.0, "dy_m": 0.0, "dh1_m": 0.0, "dh_m": 0.0,
+               "pixel_px": {"dist": "normal", "sigma": 0.3}, "pixel_relation": "common"},
+    "solver": {"variants": ["normalised"]},
+    "sweep": [{"errors.pixel_px.sigma": [0.3, 0.6]}],
+}
+"""Survey errors zero, so the pixel error alone sets the metrics (error ∝ pixel sigma)."""
+
+
+def test_a_small_in_process_run_takes_the_reference_path_and_says_which_path_ran(monkeypatch):
+    """A small study runs the reference path in process: bit for bit the run that keeps per-trial
+    values (which always takes it). Forced onto the compiled kernel it says "fast" and differs in
+    the last digits only."""
+    study = _study(SHARP)
+    small = run_study(study, QUIET)
+    per_trial = run_study(_study({**SHARP, "study": {**SHARP["study"], "per_trial": True}}),
+                          QUIET)
+    assert small.kernel == "reference" and small.trials == {}
+    pd.testing.assert_frame_equal(small.to_frame(), per_trial.to_frame(), check_exact=True)
+    monkeypatch.setattr(runner, "REFERENCE_BELOW", 0.0)
+    fast = run_study(study, QUIET)
+    assert fast.kernel == "fast"
+    a, b = small.to_frame(), fast.to_frame()
+    values = ["mean", "std", "p95", "max"]
+    assert (a[values] != b[values]).to_numpy().any()
+    np.testing.assert_allclose(b[values], a[values], rtol=1e-9, atol=0)
+
+
+def test_two_sweep_keys_and_a_failure_reason_at_some_points_only():
+    """ψ 44.9° in a 90° field with 2 px pixel errors puts targets outside the field; ψ 30° never.
+    The summary has the two sweep keys after the point, one row per (point, variant, metric)
+    numbered from 0, and the reason's count as an integer column, 0 where no trial failed."""
+    raw = {**SHARP, "errors": {**SHARP["errors"], "pixel_px": {"dist": "normal", "sigma": 2.0}},
+           "sweep": [{"mounting.psi_deg": [30.0, 44.9]}, {"geometry.H_m": [1.0, 2.0]}]}
+    study = _study(raw)
+    frame = run_study(study, QUIET).to_frame()
+    assert list(frame.columns[:6]) == ["point", "mounting.psi_deg", "geometry.H_m", "variant",
+                                       "metric", "unit"]
+    assert frame.index.equals(pd.RangeIndex(4 * 6))
+    for point, rows in frame.groupby("point"):
+        values = study.points[point].values
+        assert (rows["mounting.psi_deg"] == values["mounting.psi_deg"]).all()
+        assert (rows["geometry.H_m"] == values["geometry.H_m"]).all()
+    assert frame["invalid_OUTSIDE_FOV"].dtype == np.int64
+    assert frame["invalid_fraction"].dtype == np.float64
+    assert (frame["invalid_fraction"] == frame["invalid"] / frame["trials"]).all()
+    assert (frame["invalid_OUTSIDE_FOV"] == frame["invalid"]).all()  # the only reason
+    at_30 = frame["mounting.psi_deg"] == 30.0
+    assert (frame.loc[at_30, "invalid"] == 0).all() and (frame.loc[~at_30, "invalid"] > 0).all()
+    assert (frame["count"] + frame["invalid"] == 200).all()
+
+
+def test_a_reference_run_does_not_resume_from_checkpoints_of_the_compiled_kernel(monkeypatch,
+                                                                                 tmp_path):
+    monkeypatch.setattr(runner, "REFERENCE_BELOW", 0.0)
+    study = _study(SHARP)
+    options = RunOptions(n_jobs=1, progress=False, checkpoint_dir=tmp_path / "ck")
+
+    def stop(point):
+        raise KeyboardInterrupt
+
+    from montecarlo.errors import RunInterrupted
+
+    with pytest.raises(RunInterrupted):
+        run_study(study, options, on_point=stop)  # point 0 saved by the compiled kernel
+    reference = run_study(study, replace(options, reference=True))
+    assert reference.resumed == {} and reference.kernel == "reference"
+    fast = run_study(study, options)
+    assert fast.resumed["points"] == [0] and fast.kernel == "fast"
+
+
+def test_per_trial_values_and_counts_through_two_interruptions(tmp_path):
+    """Interrupted after one point, then again after one more: the second says 2 finished, 1 in
+    that run; the third run resumes both and its per-trial values equal an uninterrupted run's."""
+    from montecarlo.errors import RunInterrupted
+
+    raw = {**SHARP, "study": {**SHARP["study"], "per_trial": True, "trials": 50},
+           "sweep": [{"errors.pixel_px.sigma": [0.3, 0.6, 0.9]}]}
+    study = _study(raw)
+    options = RunOptions(n_jobs=1, progress=False, checkpoint_dir=tmp_path / "ck")
+
+    def stop(point):
+        raise KeyboardInterrupt
+
+    for finished in (1, 2):
+        with pytest.raises(RunInterrupted) as err:
+            run_study(study, options, on_point=stop)
+        assert f"{finished} of 3 grid points finished (1 in this run)" in str(err.value)
+    resumed = run_study(study, options)
+    assert resumed.resumed["points"] == [0, 1]
+    whole = run_study(study, QUIET)
+    assert sorted(resumed.trials) == [0, 1, 2]
+    for p in range(3):
+        pd.testing.assert_frame_equal(resumed.trials[p], whole.trials[p], check_exact=True)
+    pd.testing.assert_frame_equal(resumed.to_frame(), whole.to_frame(), check_exact=True)
+
+
+def test_enumerated_corners_in_process_give_the_exact_statistic():
+    """Every bounded source at both ends (dx, dh and four independent pixel coordinates: 2^6
+    corners): the spec's p95 is exact, its interval a single value, and the verdict follows
+    from it alone."""
+    raw = {**SHARP, "errors": {"dx_m": {"dist": "uniform", "bound": 0.1}, "dy_m": 0.0,
+                               "dh1_m": 0.0, "dh_m": {"dist": "uniform", "bound": 0.001},
+                               "pixel_px": {"dist": "uniform", "bound": 0.5},
+                               "pixel_relation": "independent", "evaluation": "worst_case"},
+           "spec": {"metric": "rotation_angle", "statistic": "p95", "limit": 1e3},
+           "sweep": [{"geometry.L_m": [50.0, 100.0]}]}
+    study = _study(raw)
+    assert not any(gp.sampled for gp in study.points)
+    assert [gp.trials for gp in study.points] == [64, 64]
+    frame = run_study(study, QUIET).to_frame()
+    judged = frame[frame["metric"] == "rotation_angle"]
+    assert len(judged) == 2 and (judged["verdict"] == "meets").all()
+    assert (judged["spec_lo"] == judged["spec_value"]).all()
+    assert (judged["spec_hi"] == judged["spec_value"]).all()
+    assert (judged["spec_value"] == judged["p95"]).all()
+
+
+def test_a_chunk_of_one_trial_with_blocks_of_one():
+    study = _study({**SHARP, "study": {**SHARP["study"], "block_size": 1}})
+    assert runner.checked_options(study, RunOptions(chunk_size=1)).chunk_size == 1
+
+
+@pytest.mark.parametrize(("seconds", "text"), [
+    (2 * 60.0, "2 min"), (2 * 3600.0, "2 h"), (2 * 86400.0, "2 days"),
+    (2 * 365.25 * 86400, "2 years"), (2 * 365.25 * 86400 - 1, "7.3e+02 days"),
+])
+def test_durations_at_twice_each_unit(seconds, text):
+    assert runner.duration_text(seconds) == text
+
+
+# --- the dask watch: a fake client and clock, no waiting -----------------------------------------
+
+
+class _FakeCluster:
+    """``scheduler_info`` answers from a script of (clock, workers); None: the scheduler does not
+    answer. Each poll sets the clock the watcher reads."""
+
+    def __init__(self, script):
+        self.script, self.polls, self.now = list(script), 0, 0.0
+
+    def scheduler_info(self):
+        self.now, workers = self.script[self.polls]
+        self.polls += 1
+        if workers is None:
+            raise OSError("scheduler gone")
+        return {"workers": workers}
+
+    def monotonic(self):
+        return self.now
+
+
+class _Stop:
+    """A stop event set after ``polls`` waits; records each wait's timeout."""
+
+    def __init__(self, polls=math.inf):
+        self.polls, self.waits = polls, []
+
+    def wait(self, timeout):
+        self.waits.append(timeout)
+        return len(self.waits) > self.polls
+
+
+def test_the_dask_watch_interrupts_once_no_worker_was_seen_for_the_wait(monkeypatch):
+    """Workers come and go: the watch counts from the first poll without one (an unreachable
+    scheduler counts as none), starts again when a worker is back, and interrupts the run once
+    more than WORKER_WAIT [s] passed without one."""
+    wait = runner.WORKER_WAIT
+    w = {"tcp://w:1": {}}
+    fake = _FakeCluster([(100.0, w), (110.0, {}), (110.0 + wait - 1, None), (150.0, w),
+                         (160.0, {}), (160.0 + wait, {}), (161.0 + wait, {})])
+    interrupts: list[int] = []
+    monkeypatch.setattr(runner, "time", fake)
+    monkeypatch.setattr(runner._thread, "interrupt_main", lambda: interrupts.append(1))
+    gone: list[str] = []
+    stop = _Stop()
+    runner._watch_workers(fake, stop, gone)
+    assert fake.polls == 7 and interrupts == [1]
+    assert gone == [f"no dask worker for {wait:.0f} s"]
+    assert stop.waits == [2.0] * 7
+
+
+def test_the_dask_watch_ends_quietly_when_the_run_ends(monkeypatch):
+    fake = _FakeCluster([(100.0, {}), (100.0 + 10 * runner.WORKER_WAIT, {"w": {}})])
+    monkeypatch.setattr(runner, "time", fake)
+    monkeypatch.setattr(runner._thread, "interrupt_main", lambda: pytest.fail("interrupted"))
+    gone: list[str] = []
+    runner._watch_workers(fake, _Stop(polls=2), gone)
+    assert fake.polls == 2 and gone == []
+
+
+# --- adaptive trials (run --until-decided), in process -------------------------------------------
+
+DECIDE = {
+    **SHARP,
+    "study": {"name": "decide", "system": "ground", "trials": 10, "seed": 3, "per_trial": True},
+    "spec": {"metric": "rotation_angle", "statistic": "p95", "limit": 0.1},
+    "sweep": [{"errors.pixel_px.sigma": [1e-3, 2e-3, 10.0]}],
+}
+"""Three points whose every trial is far from the 0.1 mrad limit: about 0.001 and 0.002 mrad
+(below it) and 1 to 30 mrad (above it)."""
+
+
+def _first_bounded_count(p=0.95, confidence=0.95):
+    """Fewest trials whose p-quantile interval has an upper end (its rank ``s <= n``)."""
+    from scipy.stats import binom
+
+    n = 1
+    while binom.ppf(1 - (1 - confidence) / 2, n, p) + 1 > n:
+        n += 1
+    return n
+
+
+def _verdicts(result):
+    return result.to_frame().dropna(subset=["verdict"]).sort_values("point")["verdict"].tolist()
+
+
+def test_until_decided_doubles_undecided_points_until_their_verdict_is_decided(tmp_path, caplog):
+    """Below the limit a point meets only once its p95 interval has an upper end (72 trials, from
+    the binomial), so it grows 10, 20, 40, 80; above it, every order statistic exceeds the limit
+    and it fails at once, keeping its 10 trials and its result. The grown points equal direct
+    runs of 80 trials; no checkpoint is written."""
+    from montecarlo.engine.runner import run_until_decided
+
+    assert _first_bounded_count() == 72
+    study = _study(DECIDE)
+    first = run_study(study, QUIET)
+    assert _verdicts(first) == ["undecided", "undecided", "fails"]
+    options = RunOptions(n_jobs=1, progress=False, checkpoint_dir=tmp_path / "ck")
+    with caplog.at_level("INFO", logger="montecarlo"):
+        grown = run_until_decided(study, options, max_trials=1000)
+    assert [gp.trials for gp in grown.study.points] == [80, 80, 10]
+    assert _verdicts(grown) == ["meets", "meets", "fails"]
+    for t in (20, 40, 80):
+        assert f"decide: 2 grid point(s) undecided; running them again with {t} trials" \
+            in caplog.text
+    assert "still undecided" not in caplog.text and not (tmp_path / "ck").exists()
+    direct = run_study(_study(DECIDE, trials=80), QUIET)
+    summary, expected = grown.to_frame(), direct.to_frame()
+    for p in (0, 1):
+        pd.testing.assert_frame_equal(summary[summary["point"] == p],
+                                      expected[expected["point"] == p], check_exact=True)
+        pd.testing.assert_frame_equal(grown.trials[p], direct.trials[p], check_exact=True)
+    pd.testing.assert_frame_equal(grown.points[2].summary, first.points[2].summary,
+                                  check_exact=True)
+    assert list(grown.trials) == [0, 1, 2]
+    pd.testing.assert_frame_equal(grown.trials[2], first.trials[2], check_exact=True)
+
+
+@pytest.mark.parametrize(("max_trials", "trials", "verdict"), [
+    (10, 10, "undecided"), (60, 60, "undecided"), (71, 71, "undecided"), (72, 72, "meets")])
+def test_until_decided_stops_at_max_trials_and_names_the_points_left(caplog, max_trials, trials,
+                                                                      verdict):
+    """The last round is cut to ``max_trials`` (40 -> 60, not 80); a point still undecided
+    there is named in a warning."""
+    from montecarlo.engine.runner import run_until_decided
+
+    with caplog.at_level("INFO", logger="montecarlo"):
+        result = run_until_decided(_study(DECIDE), QUIET, max_trials=max_trials)
+    assert [gp.trials for gp in result.study.points] == [trials, trials, 10]
+    assert _verdicts(result) == [verdict, verdict, "fails"]
+    assert [len(result.trials[p]) for p in range(3)] == [trials, trials, 10]
+    still = f"decide: still undecided at {max_trials:,} trials: grid point(s) 0, 1"
+    assert (still in caplog.text) == (verdict == "undecided")
+    assert ("running them again" in caplog.text) == (max_trials > 10)
+
+
+def test_until_decided_needs_a_spec():
+    from montecarlo.engine.runner import run_until_decided
+    from montecarlo.errors import InputError
+
+    raw = {k: v for k, v in DECIDE.items() if k != "spec"}
+    with pytest.raises(InputError, match=r"<study>: spec: --until-decided needs a \[spec\]"):
+        run_until_decided(_study(raw), QUIET, max_trials=100)

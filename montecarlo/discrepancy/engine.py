@@ -548,10 +548,11 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             others = [t.name for t in tests if t.status == "testable" and t.name not in dropped]
             alt = _effect_for_outliers(full, fit, [t.name for t in outliers], others, fixed)
             if alt is not None:
+                tested = fit
                 name, fit = alt
                 for t in outliers:
                     dropped[t.name] = math.nan
-                steps.append(Step(steps[-1].fit if steps else fit, tests, name, (name,), snoop,
+                steps.append(Step(tested, tests, name, (name,), snoop,
                                   {t.name: math.nan for t in outliers}))
                 outliers = []
                 named.append(name)

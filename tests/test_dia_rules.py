@@ -1,0 +1,565 @@
+"""The DIA engine's adaptation rules on designs built so that the answer is known.
+
+A line ``a + b x`` on 40 points plus candidate columns. The "noise" is a fixed random vector
+projected orthogonal to every column of the design, so any model holding the true columns
+fits it exactly and every chi-square difference is a number computed here with numpy's lstsq:
+the rules (Akaike's criterion with a chi-square test for added parameters, Wald tests with
+Holm, one effect instead of flagged observations) are then checked on margins far from their
+thresholds, and against scipy's chi-square quantiles.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from montecarlo.discrepancy import engine
+from montecarlo.discrepancy.engine import Diagnosis, analyse_candidates, diagnose, holm
+from montecarlo.discrepancy.fit import fit_model
+from montecarlo.discrepancy.problem import Effect, Problem, with_outliers
+
+N = 40
+X = np.linspace(-1.0, 1.0, N)
+ONE = np.ones(N)
+A_ROW, B_ROW = 3, 30
+ENDS = np.eye(N)[A_ROW] + np.eye(N)[B_ROW]
+LINE = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
+
+
+def noise(*columns, seed=0):
+    """Unit-variance noise orthogonal to the line and ``columns`` (its norm^2 is ~N - p)."""
+    e = np.random.default_rng(seed).standard_normal(N)
+    Q = np.linalg.qr(np.column_stack([ONE, X, *columns]))[0]
+    return e - Q @ (Q.T @ e)
+
+
+def linear(y, candidates, bounds=None, observations=False):
+    """The line plus candidates ``name -> {parameter: column}`` (bounds +-100 unless given)."""
+    bounds = bounds or {}
+    cols = {p: c for params in candidates.values() for p, c in params.items()}
+    effects = tuple(Effect(name, tuple(params), tuple(bounds.get(p, (-100.0, 100.0))
+                                                      for p in params), (1e-3,) * len(params))
+                    for name, params in candidates.items())
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        return y - p("a") - p("b") * X - sum(p(k) * c for k, c in cols.items())
+
+    obs = tuple((f"P{i}", i, (i,)) for i in range(N)) if observations else ()
+    return Problem("toy", LINE, effects, residuals, {"a": 0.0, "b": 0.0}, observations=obs)
+
+
+def chi2_of(y, *columns):
+    A = np.column_stack([ONE, X, *columns])
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r = y - A @ coef
+    return float(r @ r), coef, np.linalg.inv(A.T @ A)
+
+
+def aic(chi2, parameters):
+    return chi2 + 2.0 * parameters
+
+
+# --- one effect instead of the shifts of flagged observations ----------------------------------
+
+
+@pytest.mark.parametrize(("left", "replaced"), [(1.0, True), (2.5, False)])
+def test_one_effect_replaces_flagged_shifts_only_where_akaike_prefers_it(left, replaced):
+    """Observations A and B off by 10 + d and 10 - d, both flagged (two shift parameters), a
+    quadratic in the model. The effect 'ends' (one parameter, 1 at A and B) leaves ``left`` of
+    chi-square (d set for it): it replaces the shifts when that is below 2 (one parameter
+    fewer), so for 1.0 and not for 2.5."""
+    gap = np.eye(N)[A_ROW] - np.eye(N)[B_ROW]
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2, ENDS]))[0]
+    d = math.sqrt(left) / np.linalg.norm(gap - Q @ (Q.T @ gap))
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + 10.0 * ENDS + d * gap \
+        + noise(X**2, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+    weak = ENDS + 0.1 * np.eye(N)[20]  # also fits, a little worse: 'ends' is the better one
+    problem = with_outliers(linear(y, {"quadratic": {"q": X**2}, "bow": {"w": X**4},
+                                       "slope": {"s": 2.0 * X}, "weak": {"k": weak},
+                                       "ends": {"e": ENDS}}, observations=True))
+    flagged = [f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"]
+    fit = fit_model(problem, ("quadratic", *flagged))
+    with_shifts, *_ = chi2_of(y, X**2, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+    with_ends, coef, _ = chi2_of(y, X**2, ENDS)
+    with_weak, *_ = chi2_of(y, X**2, weak)
+    assert fit.chi2 == pytest.approx(with_shifts, rel=1e-9)
+    assert with_ends - with_shifts == pytest.approx(left, rel=1e-9)
+    assert with_ends < with_weak
+    # 'slope' cannot be fitted beside the line (skipped); the others in this order
+    got = engine._effect_for_outliers(problem, fit, flagged, ["bow", "slope", "weak", "ends"],
+                                      set())
+    assert bool(aic(with_ends, 4) < aic(with_shifts, 5)) is replaced
+    assert bool(aic(with_weak, 4) < aic(with_shifts, 5)) is replaced
+    if not replaced:
+        assert got is None
+        return
+    name, alt = got
+    assert name == "ends" and alt.effects == ("line", "quadratic", "ends")
+    assert alt.chi2 == pytest.approx(with_ends, rel=1e-9)
+    np.testing.assert_allclose(alt.values, coef, rtol=1e-7)
+
+
+def kink_problem():
+    """A nonlinear effect: ``k eps u + k^3 (e_A + e_B)``. At k = 0 its column is ``eps u``
+    (zero at A and B), so the linearised test cannot see the two observations where it is
+    largest: they are flagged first. The data are this effect at k0 = 10^(1/3) (A and B 10
+    sigma off) and the noise."""
+    u = 3.0 * np.sin(7.0 * X)
+    u[[A_ROW, B_ROW]] = 0.0
+    u -= np.column_stack([ONE, X]) @ np.linalg.lstsq(np.column_stack([ONE, X]), u, rcond=None)[0]
+    u[[A_ROW, B_ROW]] = 0.0
+    eps, k0 = 0.05, 10.0 ** (1.0 / 3.0)
+    y = 0.3 + 0.5 * X + k0 * eps * u + k0**3 * ENDS \
+        + noise(u, np.eye(N)[A_ROW], np.eye(N)[B_ROW], seed=1)
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        k = p("k")
+        return y - p("a") - p("b") * X - k * eps * u - k**3 * ENDS
+
+    effects = (Effect("kink", ("k",), ((-10.0, 10.0),), (1e-4,)),)
+    obs = tuple((f"P{i}", i, (i,)) for i in range(N))
+    return Problem("toy", LINE, effects, residuals, {"a": 0.0, "b": 0.0}, observations=obs), \
+        y, eps, u
+
+
+def test_an_effect_seen_first_as_two_wrong_observations_replaces_them():
+    """docs/discrepancy.md, Swap: before stopping with flagged observations, one effect fitted
+    instead of all their shifts is tried. The two observations are flagged one after the other;
+    the kink, fitted instead of both shifts, fits better with one parameter fewer: it is named,
+    the shifts are dropped (no p-value: replaced, not tested), and the final model equals the
+    least-squares minimum over k (a one-dimensional search, the line by lstsq at each k)."""
+    problem, y, eps, u = kink_problem()
+    d = diagnose(problem)
+    flagged = [f"outlier:P{B_ROW}", f"outlier:P{A_ROW}"]  # B first: the larger residual
+    assert d.named == ["kink"] and d.outliers == [] and not d.unexplained
+    assert [s.winner for s in d.steps] == [*flagged, "kink", None]
+    replaced = d.steps[2]
+    assert replaced.group == ("kink",)
+    assert [t.name for t in replaced.snoop] == [f"outlier:P{i}" for i in range(N)]
+    assert replaced.fit.effects == ("line", *flagged)  # the model whose tests it records
+    assert replaced.fit.chi2 == pytest.approx(chi2_of(y, np.eye(N)[A_ROW], np.eye(N)[B_ROW])[0],
+                                              rel=1e-9)
+    assert list(replaced.dropped) == flagged and all(map(math.isnan, replaced.dropped.values()))
+    assert list(d.dropped) == flagged and all(map(math.isnan, d.dropped.values()))
+    assert d.steps[3].fit is d.after and d.after.effects == ("line", "kink")
+
+    def profile(k):
+        return chi2_of(y - k * eps * u - k**3 * ENDS)[0]
+
+    best = min(np.linspace(0.0, 4.0, 4001), key=profile)
+    assert d.after.params["k"] == pytest.approx(best, abs=2e-3)
+    assert d.after.chi2 == pytest.approx(profile(d.after.params["k"]), rel=1e-9)
+    assert d.after.chi2 <= profile(best) + 1e-9
+    assert d.effect_result("kink")["p_value"] == next(
+        t.p_adjusted for t in d.steps[2].tests if t.name == "kink")
+
+
+# --- swaps at the end ------------------------------------------------------------------------
+
+
+CANDIDATES = {"quadratic": {"q": X**2}, "cubic": {"c": X**3},
+              "wide": {"w2": X**2, "w3": X**3}}
+
+
+def test_a_swap_to_fewer_parameters_gains_akaikes_two_per_parameter():
+    """Data: the line and a quadratic. Named: 'wide' (quadratic + cubic). Swapping it for the
+    quadratic leaves chi-square unchanged (the noise is orthogonal to x^3) and saves one
+    parameter: Akaike's criterion drops by exactly 2; the cubic instead would lose the x^2
+    signal. Nothing else lowers it afterwards."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2, X**3)
+    problem = linear(y, CANDIDATES)
+    fit = fit_model(problem, ("wide",))
+    chi2, *_ = chi2_of(y, X**2)
+    final, swaps = engine._swap(problem, fit, ["wide"], ["cubic", "quadratic"], set())
+    assert [s[:2] for s in swaps] == [("wide", "quadratic")]
+    assert swaps[0][2] == pytest.approx(aic(chi2, 4), rel=1e-9)
+    assert swaps[0][3] == pytest.approx(aic(chi2, 3), rel=1e-9)
+    assert final.effects == ("line", "quadratic") and final.chi2 == pytest.approx(chi2, rel=1e-9)
+
+
+@pytest.mark.parametrize(("drop", "swapped"), [(4.0, False), (9.0, True)])
+def test_a_swap_adding_parameters_needs_the_chi2_test_of_the_extra_ones(drop, swapped):
+    """Named: the quadratic; the data also hold a cubic whose part orthogonal to the model
+    carries ``drop`` of chi-square. Akaike alone swaps for 'wide' whenever drop > 2; the
+    swap must also pass chi2_{0.99}(1) = 6.63: 4 does not, 9 does."""
+    cubic = X**3 - np.column_stack([ONE, X, X**2]) @ np.linalg.lstsq(
+        np.column_stack([ONE, X, X**2]), X**3, rcond=None)[0]
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + math.sqrt(drop) * cubic / np.linalg.norm(cubic) \
+        + noise(X**2, X**3)
+    problem = linear(y, CANDIDATES)
+    fit = fit_model(problem, ("quadratic",))
+    assert fit.chi2 - chi2_of(y, X**2, X**3)[0] == pytest.approx(drop, rel=1e-9)
+    assert drop > 2.0 and bool(drop > stats.chi2.isf(0.01, 1)) is swapped
+    final, swaps = engine._swap(problem, fit, ["quadratic"], ["wide"], set())
+    assert [s[:2] for s in swaps] == ([("quadratic", "wide")] if swapped else [])
+    assert final.effects == ("line", "wide" if swapped else "quadratic")
+
+
+def test_every_candidate_is_tried_and_the_lowest_criterion_wins():
+    """Named: the quadratic, where the data are 5 x^2 plus a cubic part worth chi-square 4.
+    Offered in order: the slope's column (cannot be fitted), 'wide' (adds a parameter for 4 of
+    chi-square: refused by the chi2(1) test), a rough one-parameter column and the exact one.
+    Both lower Akaike's criterion; the exact one (by 4) is taken."""
+    Q3 = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    cubic = X**3 - Q3 @ (Q3.T @ X**3)
+    cubic *= 2.0 / np.linalg.norm(cubic)
+    exact, rough = 5.0 * X**2 + cubic, 5.0 * X**2 + 0.5 * cubic
+    y = 0.3 + 0.5 * X + exact + noise(X**2, X**3)
+    problem = linear(y, {**CANDIDATES, "slope": {"s": 2.0 * X}, "rough": {"r": rough},
+                         "exact": {"e": exact}})
+    fit = fit_model(problem, ("quadratic",))
+    chi2 = {n: chi2_of(y, col)[0] for n, col in (("quadratic", X**2), ("rough", rough),
+                                                  ("exact", exact))}
+    assert chi2["exact"] < chi2["rough"] < chi2["quadratic"]
+    assert chi2["quadratic"] - chi2["exact"] == pytest.approx(4.0, rel=1e-9)
+    final, swaps = engine._swap(problem, fit, ["quadratic"], ["slope", "wide", "rough", "exact"],
+                                set())
+    assert [s[:2] for s in swaps] == [("quadratic", "exact")]
+    assert final.chi2 == pytest.approx(chi2["exact"], rel=1e-9)
+
+
+def test_a_candidate_absorbed_by_the_model_replaces_only_an_effect_with_more_parameters():
+    """The cubic named where the data hold a quadratic: the quadratic, offered among the
+    candidates absorbed by the final model, may not replace the one-parameter cubic, but it
+    replaces the two-parameter 'wide'."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2, X**3)
+    problem = linear(y, CANDIDATES)
+    cubic_fit = fit_model(problem, ("cubic",))
+    assert engine._swap(problem, cubic_fit, ["cubic"], [], set(), ["quadratic"])[1] == []
+    assert [s[:2] for s in engine._swap(problem, cubic_fit, ["cubic"], ["quadratic"],
+                                        set())[1]] == [("cubic", "quadratic")]
+    wide_fit = fit_model(problem, ("wide",))
+    assert [s[:2] for s in engine._swap(problem, wide_fit, ["wide"], [], set(),
+                                        ["quadratic"])[1]] == [("wide", "quadratic")]
+
+
+def test_the_result_of_an_effect_swapped_in_is_its_wald_test_in_the_final_model():
+    """An effect that no step named (swapped in at the end) reports the Wald test of its
+    parameters in the final model: T = b^2 / var(b) from lstsq, its chi2(1) tail."""
+    rng = np.random.default_rng(4)
+    y = 0.3 + 0.5 * X + 0.8 * X**2 + rng.standard_normal(N)
+    problem = linear(y, CANDIDATES)
+    fit = fit_model(problem, ("quadratic",))
+    d = Diagnosis(problem, 0.01, fit_model(problem, ()), fit, [], ["quadratic"], [], [])
+    _, coef, cov = chi2_of(y, X**2)
+    T = coef[2] ** 2 / cov[2, 2]
+    got = d.effect_result("quadratic")
+    assert set(got) == {"name", "parameters", "stderr", "p_value", "p_value_unadjusted",
+                        "statistic", "dof", "swapped_in"}
+    assert got["name"] == "quadratic" and got["swapped_in"] is True and got["dof"] == 1
+    assert got["parameters"] == {"q": pytest.approx(coef[2], rel=1e-7)}
+    assert got["stderr"] == {"q": pytest.approx(math.sqrt(cov[2, 2]), rel=1e-7)}
+    assert got["statistic"] == pytest.approx(T, rel=1e-6)
+    assert got["p_value"] == got["p_value_unadjusted"] == pytest.approx(stats.chi2.sf(T, 1),
+                                                                        rel=1e-6)
+
+
+# --- reconsidering what was named ------------------------------------------------------------
+
+
+def test_a_named_effect_the_others_explain_is_dropped_and_the_rest_refitted():
+    """Named quadratic and cubic, the data hold only the quadratic (the cubic's estimate is
+    exactly 0): the cubic is dropped with Holm's adjusted p-value of its Wald test, the model
+    refitted with the quadratic kept."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2, X**3)
+    problem = linear(y, CANDIDATES)
+    fit = fit_model(problem, ("quadratic", "cubic"))
+    _, coef, cov = chi2_of(y, X**2, X**3)
+    wald = [stats.chi2.sf(coef[k] ** 2 / cov[k, k], 1) for k in (2, 3)]
+    refit, gone = engine._reconsider(problem, fit, ["quadratic", "cubic"], set(), 0.01)
+    assert list(gone) == ["cubic"]
+    assert gone["cubic"] == pytest.approx(holm(wald)[1], abs=1e-9)
+    assert refit.effects == ("line", "quadratic")
+    assert refit.chi2 == pytest.approx(chi2_of(y, X**2)[0], rel=1e-9)
+
+
+def test_one_flagged_observation_is_tested_a_single_named_effect_is_not():
+    """A flagged observation that is not off (its shift is exactly 0) is dropped even when it is
+    the only one; a single named effect has no others to be explained by and stays."""
+    y = 0.3 + 0.5 * X + 0.5 * X**3 + noise(X**3, np.eye(N)[7])
+    problem = with_outliers(linear(y, CANDIDATES, observations=True))
+    fit = fit_model(problem, ("cubic", "outlier:P7"))
+    refit, gone = engine._reconsider(problem, fit, ["cubic", "outlier:P7"], set(), 0.01)
+    assert list(gone) == ["outlier:P7"] and gone["outlier:P7"] == pytest.approx(1.0)
+    assert refit.effects == ("line", "cubic")
+    quiet = linear(0.3 + 0.5 * X + noise(), CANDIDATES)
+    alone = fit_model(quiet, ("cubic",))
+    assert engine._reconsider(quiet, alone, ["cubic"], set(), 0.01)[1] == {}
+
+
+def test_a_refit_after_a_drop_keeps_absorbed_parameters_out():
+    """'bend' enters with its bow only (its tilt, 3 x, is the slope's column: held at zero).
+    Dropping the cubic beside it refits without the tilt (with it the design is singular)."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2, X**3)
+    problem = linear(y, {"bend": {"t": 3.0 * X, "w": X**2}, "cubic": {"c": X**3}})
+    fit = engine._fit_with_fixed(problem, ["bend", "cubic"], {}, {"t"})
+    refit, gone = engine._reconsider(problem, fit, ["bend", "cubic"], {"t"}, 0.01)
+    assert list(gone) == ["cubic"] and refit.names == ("a", "b", "w")
+
+
+# --- the identification statistics --------------------------------------------------------------
+
+
+def test_a_zero_column_is_neither_tested_nor_absorbed():
+    y = 0.3 + 0.5 * X + noise()
+    problem = linear(y, {"half": {"z": 0.0 * X, "h": X**2}})
+    t = analyse_candidates(problem, fit_model(problem, ()))[0]
+    assert t.status == "testable" and t.active == ("h",) and t.absorbed_by == {}
+    assert t.retained["z"] == 0.0
+
+
+def test_retained_fraction_of_a_short_column():
+    """A column of norm 0.05 keeps the same fraction of it beside the line as x^2 itself."""
+    y = 0.3 + 0.5 * X + noise()
+    Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    col = 0.05 * X**2 / np.linalg.norm(X**2)
+    fraction = np.linalg.norm(col - Q @ (Q.T @ col)) / np.linalg.norm(col)
+    problem = linear(y, {"short": {"s": col}})
+    t = analyse_candidates(problem, fit_model(problem, ()))[0]
+    assert t.retained["s"] == pytest.approx(fraction, rel=1e-6) and fraction < 1.0
+
+
+def test_a_column_absorbed_by_two_model_parameters_names_both():
+    y = 0.3 + 0.5 * X + noise()
+    problem = linear(y, {"offset_tilt": {"o": 1.0 + X}})
+    t = analyse_candidates(problem, fit_model(problem, ()))[0]
+    assert t.status == "absorbed" and t.reason == "absorbed by a, b"
+    assert t.absorbed_by == {"o": ["a", "b"]}
+
+
+@pytest.mark.parametrize("bound", [(-100.0, 0.0), (0.0, 100.0)])
+def test_reach_takes_the_larger_end_of_asymmetric_bounds(bound):
+    """A column of norm 1 beside the line, bounded on one side only: its largest noncentrality
+    is 100^2 (testable) whichever side the bound is on."""
+    y = 0.3 + 0.5 * X + noise()
+    Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    g = X**2 - Q @ (Q.T @ X**2)
+    problem = linear(y, {"one_sided": {"s": g / np.linalg.norm(g)}}, bounds={"s": bound})
+    t = analyse_candidates(problem, fit_model(problem, ()))[0]
+    assert t.status == "testable"
+
+
+def test_undetectable_where_the_largest_noncentrality_is_half_lambda0():
+    """Bound chosen so that (bound |g|)^2 = lambda0 / 2 with |g| of order 1 (not far below):
+    undetectable, and the reason quotes that largest noncentrality."""
+    y = 0.3 + 0.5 * X + noise()
+    Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    g = X**2 - Q @ (Q.T @ X**2)
+    g /= np.linalg.norm(g)
+    lam0 = max(engine.noncentrality(0.01, N - 2), engine.noncentrality(0.01, 1))
+    bound = math.sqrt(lam0 / 2.0)
+    problem = linear(y, {"weak": {"s": g}}, bounds={"s": (-bound, bound)})
+    t = analyse_candidates(problem, fit_model(problem, ()))[0]
+    assert t.lambda0 == pytest.approx(lam0, rel=1e-12)
+    assert t.status == "undetectable"
+    assert t.reason == f"noncentrality at most {lam0 / 2:.3g} within its physical bounds, " \
+                       f"{lam0:.3g} needed"
+
+
+def test_one_degree_of_freedom_left_still_has_a_global_test():
+    """Three points, a line: one degree of freedom. lambda0 is the larger of the global test's
+    (1 dof) and the candidate's own, both finite (scipy's noncentral chi2 checks the power)."""
+    x = np.array([-1.0, 0.2, 1.0])
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        return np.array([0.3, 0.9, 0.1]) - p("a") - p("b") * x - p("q") * x**2
+
+    problem = Problem("three", LINE, (Effect("quadratic", ("q",), ((-100.0, 100.0),),
+                                             (1e-3,)),), residuals, {"a": 0.0, "b": 0.0})
+    fit = fit_model(problem, ())
+    t = analyse_candidates(problem, fit)[0]
+    assert fit.dof == 1 and math.isfinite(t.lambda0)
+    crit = stats.chi2.isf(0.01, 1)
+    assert stats.ncx2.sf(crit, 1, t.lambda0) == pytest.approx(0.80, abs=1e-6)
+
+
+def test_the_candidates_own_test_uses_the_power_asked_for():
+    """Four points (2 dof), three candidates: the candidate's own test at alpha/3 dominates the
+    global one, at power 0.5 as at 0.8."""
+    x = np.array([-1.0, -0.4, 0.3, 1.0])
+    columns = {"quadratic": x**2, "cubic": x**3, "step": (x > 0).astype(float)}
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        return 0.2 + 0.1 * x - p("a") - p("b") * x - sum(p(n) * c for n, c in columns.items())
+
+    problem = Problem("few", LINE, tuple(Effect(n, (n,), ((-100.0, 100.0),), (1e-3,))
+                                         for n in columns), residuals, {"a": 0.0, "b": 0.0})
+    fit = fit_model(problem, ())
+    for power in (0.5, 0.8):
+        t = analyse_candidates(problem, fit, power=power)[0]
+        crit = stats.chi2.isf(0.01 / 3, 1)
+        assert stats.ncx2.sf(crit, 1, t.lambda0) == pytest.approx(power, abs=1e-6)
+
+
+def test_the_column_basis_has_the_same_rank_at_any_scale():
+    """Singular values 1, 1e-6 and 1e-15 (relative): rank 2 whether the matrix is scaled by
+    1e-9 or 1e6 (the rank tolerance is relative to the largest singular value)."""
+    rng = np.random.default_rng(0)
+    U = np.linalg.qr(rng.standard_normal((N, 3)))[0]
+    V = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    M = U @ np.diag([1.0, 1e-6, 1e-15]) @ V.T
+    for scale in (1e-9, 1.0, 1e6):
+        B = engine._orthonormal(scale * M)
+        assert B.shape == (N, 2)
+        np.testing.assert_allclose(B.T @ B, np.eye(2), atol=1e-9)
+
+
+# --- whole diagnoses ---------------------------------------------------------------------------
+
+
+def alternating(*columns):
+    """A misfit of 1.5 sigma alternating in sign (chi-square about 85), orthogonal to the line
+    and ``columns``: no candidate follows it and no single observation stands out."""
+    m = 1.5 * (-1.0) ** np.arange(N)
+    Q = np.linalg.qr(np.column_stack([ONE, X, *columns]))[0]
+    return m - Q @ (Q.T @ m)
+
+
+def test_a_misfit_no_candidate_explains_ends_with_a_step_that_names_nothing():
+    y = 0.3 + 0.5 * X + alternating(X**2, X**3) + noise(X**2, X**3)
+    d = diagnose(linear(y, CANDIDATES))
+    chi2, *_ = chi2_of(y)
+    assert d.before.chi2 == pytest.approx(chi2, rel=1e-9) and stats.chi2.sf(chi2, N - 2) < 1e-4
+    assert d.detected and d.unexplained and d.named == [] and d.outliers == []
+    [last] = d.steps
+    assert last.fit is d.before and last.fit is d.after
+    assert last.winner is None and last.group == () and last.snoop == [] and last.dropped == {}
+    assert [t.name for t in last.tests] == list(CANDIDATES)
+
+
+def test_a_20_sigma_observation_comes_before_a_10_sigma_effect_it_is_not():
+    """The step's winner is the smallest p-value (the observation, T ~ 400, against the
+    quadratic's ~ 100); the quadratic, fitted instead, leaves the observation 20 sigma off, so it
+    does not take its place. Then the quadratic is named; the final model is lstsq's."""
+    Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    g = X**2 - Q @ (Q.T @ X**2)
+    spike = np.eye(N)[7]
+    y = 0.3 + 0.5 * X + 10.0 * X**2 / np.linalg.norm(g) + 20.0 * spike + noise(X**2, spike)
+    d = diagnose(linear(y, CANDIDATES, observations=True))
+    assert [s.winner for s in d.steps] == ["outlier:P7", "quadratic", None]
+    assert d.named == ["quadratic"] and [t.name for t in d.outliers] == ["outlier:P7"]
+    assert d.after.chi2 == pytest.approx(chi2_of(y, X**2, spike)[0], rel=1e-9)
+
+
+def test_exactly_confounded_candidates_form_a_group_at_the_step_and_in_the_report():
+    """'twin' is the quadratic's column doubled: the two cannot be told apart by any data of
+    this design. Whichever is fitted, the other is its group partner (canonical correlation 1),
+    at the step and in the final report, with no separating data stated; the cubic is not."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2)
+    problem = linear(y, {"quadratic": {"q": X**2}, "cubic": {"c": X**3},
+                         "twin": {"t": 2.0 * X**2}})
+    d = diagnose(problem)
+    [fitted] = d.named
+    other = ({"quadratic", "twin"} - {fitted}).pop()
+    assert d.steps[0].group == (fitted, other) and d.groups == [(fitted, other)]
+    [group] = d.confounded
+    assert group.fitted == fitted and group.members == (fitted, other)
+    assert group.correlation == {other: pytest.approx(1.0, abs=1e-9)}
+    assert group.separating_data == {other: ""}
+    assert d.absorbed == [other] and "cubic" not in group.members
+
+
+def test_an_absorbed_parameter_stays_out_when_a_second_effect_is_added():
+    """'bend' (its tilt 3 x absorbed by the slope) is named first, the cubic second: the tilt
+    stays out of every refit, and the final model is lstsq's on (1, x, x^2, x^3)."""
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    g = X**3 - Q @ (Q.T @ X**3)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * X**3 / np.linalg.norm(g) + noise(X**2, X**3)
+    d = diagnose(linear(y, {"bend": {"t": 3.0 * X, "w": X**2}, "cubic": {"c": X**3}}))
+    assert d.named == ["bend", "cubic"] and not d.unexplained
+    assert d.after.names == ("a", "b", "w", "c")
+    chi2, coef, _ = chi2_of(y, X**2, X**3)
+    assert d.after.chi2 == pytest.approx(chi2, rel=1e-9)
+    np.testing.assert_allclose(d.after.values, coef, rtol=1e-7)
+
+
+def test_observation_tests_use_the_power_and_absorption_level_given():
+    """Null data, every point an observation. With power 0.5 each observation's lambda0 is the
+    larger of the global test's and its own at alpha / n, both at 50 %; with absorbed = 0.99
+    every observation is absorbed (beside the line none keeps 99 % of its column)."""
+    problem = linear(0.3 + 0.5 * X + noise(), CANDIDATES, observations=True)
+    d = diagnose(problem, power=0.5)
+    snoop = d.steps[0].snoop
+    assert d.named == [] and len(snoop) == N and all(t.status == "testable" for t in snoop)
+    lam0 = max(engine.noncentrality(0.01, N - 2, 0.5), engine.noncentrality(0.01 / N, 1, 0.5))
+    assert all(t.lambda0 == pytest.approx(lam0, rel=1e-12) for t in snoop)
+    d = diagnose(problem, absorbed=0.99)
+    assert all(t.status == "absorbed" for t in d.steps[0].snoop)
+
+
+def stand_in_design():
+    """Orthonormal columns P, Q, R beside the line; data 10 P + 10 Q. S = P + Q/2 + eps R
+    correlates with the data best (named first); with S and Q fitted, P still explains
+    chi-square 4 more (eps chosen for it): too little for a test (chi2_{0.99}(1) = 6.6), enough
+    for Akaike at equal parameter counts."""
+    rng = np.random.default_rng(7)
+    basis = np.linalg.qr(np.column_stack([ONE, X, rng.standard_normal((N, 3))]))[0]
+    P, Q, R = basis[:, 2], basis[:, 3], basis[:, 4]
+    eps = math.sqrt(1.0 / 24.0)  # eps^2 / (1 + eps^2) * 10^2 = 4
+    S = P + 0.5 * Q + eps * R
+    y = 0.3 + 0.5 * X + 10.0 * P + 10.0 * Q + noise(P, Q, R, seed=3)
+    return y, {"S": {"s": S}, "P": {"p": P}, "Q": {"q": Q}}
+
+
+def test_an_effect_that_stood_in_for_another_is_swapped_for_it_at_the_end():
+    y, candidates = stand_in_design()
+    d = diagnose(linear(y, candidates))
+    P, Q = candidates["P"]["p"], candidates["Q"]["q"]
+    chi2, coef, cov = chi2_of(y, P, Q)
+    assert d.steps[0].winner == "S"
+    assert sorted(d.named) == ["P", "Q"] and not d.unexplained
+    [(out, into, before, after)] = d.swaps
+    assert (out, into) == ("S", "P")
+    assert before - after == pytest.approx(4.0, rel=1e-6)
+    assert after == pytest.approx(aic(chi2, 4), rel=1e-9)
+    result = d.effect_result("P")
+    T = coef[2] ** 2 / cov[2, 2]
+    assert result["swapped_in"] is True
+    assert result["statistic"] == pytest.approx(T, rel=1e-6)
+    assert result["p_value"] == pytest.approx(stats.chi2.sf(T, 1), rel=1e-6)
+
+
+def test_an_effect_replaces_flagged_observations_also_when_a_misfit_remains():
+    """The kink design plus a misfit no candidate follows: after both observations are flagged
+    the global test still fails and nothing is significant; before stopping, the kink is tried
+    instead of the two shifts, and it is named. The misfit stays: unexplained."""
+    kink, _, _, u = kink_problem()
+    m = alternating(u, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+    problem = Problem(kink.system, kink.base, kink.candidates,
+                      lambda v: kink.residuals(v) + m, kink.start,
+                      observations=kink.observations)
+    d = diagnose(problem)
+    assert d.named == ["kink"] and d.outliers == [] and d.unexplained
+    assert d.steps[2].winner == "kink" and d.steps[2].fit.p_value < 0.01  # misfit with both
+    assert sorted(d.dropped) == sorted([f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"])
+    assert d.steps[-1].winner is None and d.steps[-1].fit is d.after
+    assert [t.name for t in d.steps[-1].snoop] == [f"outlier:P{i}" for i in range(N)]
+
+
+def test_the_group_of_a_later_effect_is_found_with_the_earlier_ones_fitted():
+    """'mix' = x^2 + 2 x^3: once the quadratic is fitted it is the cubic's column doubled (a
+    group partner of whichever of the two is fitted); beside the line alone it correlates with
+    the cubic only 0.71. The final groups are found given the rest of the final model: the
+    quadratic, and the cubic's partner."""
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    g = X**3 - Q @ (Q.T @ X**3)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * X**3 / np.linalg.norm(g) + noise(X**2, X**3)
+    mix = X**2 + 2.0 * X**3
+    d = diagnose(linear(y, {"quadratic": {"q": X**2}, "cubic": {"c": X**3},
+                            "mix": {"m": mix}}))
+    first, second = d.named
+    assert first == "quadratic" and second in ("cubic", "mix")
+    other = ({"cubic", "mix"} - {second}).pop()
+    assert d.groups[1] == (second, other)
+    Q2 = np.linalg.qr(np.column_stack([ONE, X]))[0]
+    a, b = (c - Q2 @ (Q2.T @ c) for c in (X**3, mix))
+    assert abs(a @ b) / np.linalg.norm(a) / np.linalg.norm(b) < 0.75
