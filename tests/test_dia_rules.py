@@ -563,3 +563,99 @@ def test_the_group_of_a_later_effect_is_found_with_the_earlier_ones_fitted():
     Q2 = np.linalg.qr(np.column_stack([ONE, X]))[0]
     a, b = (c - Q2 @ (Q2.T @ c) for c in (X**3, mix))
     assert abs(a @ b) / np.linalg.norm(a) / np.linalg.norm(b) < 0.75
+
+
+# --- an effect with an absorbed parameter beside the other rules ---------------------------------
+# 'bend' = t (3 x) + w x^2: its tilt is the slope's column, so it enters with its bow only and
+# every later fit must hold t at zero (with it the design is singular and cannot be fitted).
+
+BEND = {"bend": {"t": 3.0 * X, "w": X**2}}
+
+
+def test_a_swap_beside_an_effect_with_an_absorbed_parameter_holds_it_at_zero():
+    """Named 'bend' and the cubic where the data hold 4 Z (Z orthonormal to the line, x^2 and
+    x^3): the cubic is swapped for 'zed' (same parameter count, chi-square lower by 16); the
+    final model is lstsq's on (1, x, x^2, Z)."""
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2, X**3]))[0]
+    Z = np.random.default_rng(5).standard_normal(N)
+    Z -= Q @ (Q.T @ Z)
+    Z /= np.linalg.norm(Z)
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + 4.0 * Z + noise(X**2, X**3, Z)
+    problem = linear(y, {**BEND, "cubic": {"c": X**3}, "zed": {"z": Z}})
+    fit = engine._fit_with_fixed(problem, ["bend", "cubic"], {}, {"t"})
+    final, swaps = engine._swap(problem, fit, ["bend", "cubic"], ["zed"], {"t"})
+    chi2, coef, _ = chi2_of(y, X**2, Z)
+    assert fit.chi2 - chi2 == pytest.approx(16.0, rel=1e-9)
+    assert [s[:2] for s in swaps] == [("cubic", "zed")]
+    assert final.names == ("a", "b", "w", "z") and final.chi2 == pytest.approx(chi2, rel=1e-9)
+    np.testing.assert_allclose(final.values, coef, rtol=1e-7)
+
+
+def test_one_effect_replaces_flagged_shifts_beside_an_effect_with_an_absorbed_parameter():
+    """The design of the first test (left = 1) with 'bend' in the model instead of the
+    quadratic: 'ends' replaces the two shifts, and the fit is lstsq's on (1, x, x^2, e_A + e_B)."""
+    gap = np.eye(N)[A_ROW] - np.eye(N)[B_ROW]
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2, ENDS]))[0]
+    d = 1.0 / np.linalg.norm(gap - Q @ (Q.T @ gap))
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + 10.0 * ENDS + d * gap \
+        + noise(X**2, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+    problem = with_outliers(linear(y, {**BEND, "ends": {"e": ENDS}}, observations=True))
+    flagged = [f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"]
+    fit = engine._fit_with_fixed(problem, ["bend", *flagged], {}, {"t"})
+    name, alt = engine._effect_for_outliers(problem, fit, flagged, ["ends"], {"t"})
+    chi2, coef, _ = chi2_of(y, X**2, ENDS)
+    assert name == "ends" and alt.names == ("a", "b", "w", "e")
+    assert alt.chi2 == pytest.approx(chi2, rel=1e-9)
+    np.testing.assert_allclose(alt.values, coef, rtol=1e-7)
+
+
+def test_the_group_of_an_effect_beside_one_with_an_absorbed_parameter():
+    """'bend' named first, then the cubic, whose column 'twin' doubles: the cubic's group,
+    found by refitting the final model without it (bend's tilt held at zero), holds the twin
+    with canonical correlation 1."""
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2]))[0]
+    g = X**3 - Q @ (Q.T @ X**3)
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * X**3 / np.linalg.norm(g) + noise(X**2, X**3)
+    d = diagnose(linear(y, {**BEND, "cubic": {"c": X**3}, "twin": {"u": 2.0 * X**3}}))
+    assert d.named == ["bend", "cubic"] and d.groups == [("bend",), ("cubic", "twin")]
+    assert d.confounded[1].correlation == {"twin": pytest.approx(1.0, abs=1e-9)}
+    assert d.after.chi2 == pytest.approx(chi2_of(y, X**2, X**3)[0], rel=1e-9)
+
+
+def bend_basis(count, seed):
+    """``count`` orthonormal columns orthogonal to the line and x^2."""
+    rng = np.random.default_rng(seed)
+    Q = np.linalg.qr(np.column_stack([ONE, X, X**2, rng.standard_normal((N, count))]))[0]
+    return Q[:, 3:].T
+
+
+def test_a_stand_in_is_swapped_out_beside_an_effect_with_an_absorbed_parameter():
+    """The stand-in design with 20 x^2 added and 'bend' among the candidates: bend is named
+    first, then S and Q; S is swapped for P at the end as without bend (Akaike lower by 4),
+    with bend's tilt held at zero in the swap's fits."""
+    P, Qc, R = bend_basis(3, 7)
+    eps = math.sqrt(1.0 / 24.0)
+    S = P + 0.5 * Qc + eps * R
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * P + 10.0 * Qc + noise(X**2, P, Qc, R, seed=3)
+    d = diagnose(linear(y, {**BEND, "S": {"s": S}, "P": {"p": P}, "Q": {"q": Qc}}))
+    chi2, *_ = chi2_of(y, X**2, P, Qc)
+    assert [s.winner for s in d.steps[:2]] == ["bend", "S"]
+    assert sorted(d.named) == ["P", "Q", "bend"] and not d.unexplained
+    [(out, into, before, after)] = d.swaps
+    assert (out, into) == ("S", "P") and before - after == pytest.approx(4.0, rel=1e-6)
+    assert after == pytest.approx(aic(chi2, 5), rel=1e-9)
+
+
+def test_an_effect_dropped_beside_one_with_an_absorbed_parameter():
+    """As above with eps^2 = 1/3: after S, both P and Q are named, and S, whose estimate given
+    them is exactly zero (the data have no R), is dropped with Wald p = 1; the refit holds
+    bend's tilt at zero and is lstsq's on (1, x, x^2, P, Q)."""
+    P, Qc, R = bend_basis(3, 7)
+    S = P + 0.5 * Qc + math.sqrt(1.0 / 3.0) * R
+    y = 0.3 + 0.5 * X + 20.0 * X**2 + 10.0 * P + 10.0 * Qc + noise(X**2, P, Qc, R, seed=3)
+    d = diagnose(linear(y, {**BEND, "S": {"s": S}, "P": {"p": P}, "Q": {"q": Qc}}))
+    assert d.steps[1].winner == "S" and list(d.dropped) == ["S"]
+    assert d.dropped["S"] == pytest.approx(1.0, abs=1e-6)
+    assert sorted(d.named) == ["P", "Q", "bend"] and d.swaps == []
+    assert d.after.names[:3] == ("a", "b", "w")
+    assert d.after.chi2 == pytest.approx(chi2_of(y, X**2, P, Qc)[0], rel=1e-9)
