@@ -659,3 +659,66 @@ def test_an_effect_dropped_beside_one_with_an_absorbed_parameter():
     assert sorted(d.named) == ["P", "Q", "bend"] and d.swaps == []
     assert d.after.names[:3] == ("a", "b", "w")
     assert d.after.chi2 == pytest.approx(chi2_of(y, X**2, P, Qc)[0], rel=1e-9)
+
+
+def test_the_kink_replaces_flagged_shifts_beside_an_effect_with_an_absorbed_parameter():
+    """The kink design plus 20 x^2 and 'bend': bend is named first (its tilt held at zero),
+    both observations are flagged, and the kink, tried instead of their shifts in the model
+    holding bend, replaces them; the final chi-square is the least-squares minimum over k
+    (the line and x^2 by lstsq at each k)."""
+    kink, y, eps, u = kink_problem()
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        return kink.residuals(v) + 20.0 * X**2 - p("w") * X**2 - p("t") * 3.0 * X
+
+    bend = Effect("bend", ("t", "w"), ((-100.0, 100.0),) * 2, (1e-3,) * 2)
+    d = diagnose(Problem(kink.system, kink.base, (bend, *kink.candidates), residuals,
+                         kink.start, observations=kink.observations))
+    flagged = [f"outlier:P{B_ROW}", f"outlier:P{A_ROW}"]
+    assert [s.winner for s in d.steps] == ["bend", *flagged, "kink", None]
+    assert d.named == ["bend", "kink"] and d.outliers == [] and list(d.dropped) == flagged
+    assert d.after.names == ("a", "b", "w", "k")
+
+    def profile(k):
+        return chi2_of(y + 20.0 * X**2 - k * eps * u - k**3 * ENDS, X**2)[0]
+
+    assert d.after.chi2 == pytest.approx(profile(d.after.params["k"]), rel=1e-9)
+    assert d.after.chi2 <= min(map(profile, np.linspace(0.0, 4.0, 4001))) + 1e-9
+
+
+# --- an effect that explains a winning observation comes first -----------------------------------
+
+
+@pytest.mark.parametrize(("left", "absorbed", "effect_first"),
+                         [(10.0, 0.05, True), (20.0, 0.05, False), (20.0, 0.5, True)])
+def test_an_effect_that_explains_the_observation_comes_first_at_alpha_over_n(left, absorbed,
+                                                                              effect_first):
+    """The data: a spike at P7 only. Effect E's column (beside the line) correlates 0.894
+    with P7's (rho^2 = 0.8) and the spike is set so that E, fitted instead, leaves ``left`` of
+    chi-square in P7's column: P7 (T = left / 0.2) beats E (T = 0.8 left / 0.2) as the step's
+    smallest p-value. E comes first where ``left`` is below chi2 at alpha / n (40 testable
+    observations: 13.4; 10 is, 20 is not, though both exceed alpha's 6.63), or where P7's
+    column keeps less than ``absorbed`` of its norm beside E (sqrt(0.2) = 0.45 < 0.5)."""
+    rho2 = 0.8
+    Q = np.linalg.qr(np.column_stack([ONE, X, np.eye(N)[7]]))[0]
+    o = Q[:, 2] * np.sign(Q[7, 2])  # the unit column of P7 beside the line
+    h = np.random.default_rng(9).standard_normal(N)
+    h -= Q @ (Q.T @ h)
+    g = math.sqrt(rho2) * o + math.sqrt(1.0 - rho2) * h / np.linalg.norm(h)
+    s = math.sqrt(left / (1.0 - rho2)) / (np.eye(N)[7] @ o)  # |spike beside the line|^2 = T
+    y = 0.3 + 0.5 * X + s * np.eye(N)[7] + noise(np.eye(N)[7], g)
+    lo, hi = stats.chi2.isf([0.01, 0.01 / N], 1)
+    assert lo < left and bool(left < hi) is (left == 10.0)
+    d = diagnose(linear(y, {"E": {"e": g}}, observations=True), absorbed=absorbed)
+    first = d.steps[0]
+    by_name = {t.name: t for t in (*first.tests, *first.snoop)}
+    assert by_name["outlier:P7"].statistic == pytest.approx(left / (1.0 - rho2), rel=1e-9)
+    assert by_name["E"].statistic == pytest.approx(rho2 * left / (1.0 - rho2), rel=1e-9)
+    if effect_first:
+        assert first.winner == "E" and d.named == ["E"] and d.outliers == []
+        assert d.after.chi2 == pytest.approx(chi2_of(y, g)[0], rel=1e-9)
+    else:
+        assert first.winner == "outlier:P7" and d.named == []
+        assert [t.name for t in d.outliers] == ["outlier:P7"]
