@@ -16,7 +16,7 @@ from scipy import stats
 
 from montecarlo.discrepancy import engine
 from montecarlo.discrepancy.engine import Diagnosis, analyse_candidates, diagnose, holm
-from montecarlo.discrepancy.fit import fit_model
+from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Effect, Problem, with_outliers
 
 N = 40
@@ -722,3 +722,63 @@ def test_an_effect_that_explains_the_observation_comes_first_at_alpha_over_n(lef
     else:
         assert first.winner == "outlier:P7" and d.named == []
         assert [t.name for t in d.outliers] == ["outlier:P7"]
+
+
+# --- the final groups --------------------------------------------------------------------------
+
+
+def test_a_named_effect_the_model_cannot_be_refitted_without_is_a_group_of_its_own():
+    """'K' acts only through 'M' (prediction m x^2 + k m x^3): at m = 0 its column is zero,
+    so it is named after M, and the final model without M cannot be fitted (K alone is not
+    separable). M's group is M alone; K's, found with M fitted, is K alone."""
+    y = 0.3 + 0.5 * X + 5.0 * X**2 + 10.0 * X**3 + noise(X**2, X**3)
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        return y - p("a") - p("b") * X - p("m") * X**2 - p("k") * p("m") * X**3
+
+    effects = tuple(Effect(n, (n.lower(),), ((-100.0, 100.0),), (1e-3,)) for n in ("M", "K"))
+    problem = Problem("toy", LINE, effects, residuals, {"a": 0.0, "b": 0.0})
+    with pytest.raises(FitError):
+        fit_model(problem, ("K",))
+    d = diagnose(problem)
+    assert [(t.name, t.status) for t in d.steps[0].tests] == [("M", "testable"),
+                                                               ("K", "no_effect")]
+    assert d.named == ["M", "K"] and d.groups == [("M",), ("K",)]
+    assert d.confounded[0] == engine.Group("M", ("M",))
+    assert d.after.params["k"] == pytest.approx(2.0, rel=1e-9)
+
+
+def group_design(bound=100.0):
+    """Orthonormal P, C beside the line; data 20 P + 5 C (noise of norm^2 ~ 64, so that the
+    global test still fails once P is fitted); 'mix' = P - C / 2 keeps 0.447 of its norm
+    beside P and is then C's column scaled, so it is a partner of the cubic (C)."""
+    P, C = bend_basis(2, 11)
+    y = 0.3 + 0.5 * X + 20.0 * P + 5.0 * C + 1.3 * noise(P, C)
+    return linear(y, {"quadratic": {"q": P}, "cubic": {"c": C}, "mix": {"m": P - 0.5 * C}},
+                  bounds={"c": (-bound, bound)})
+
+
+def test_the_final_groups_use_the_absorption_level_given():
+    """With absorbed = 0.7, 'mix' (0.447 of its norm beside P) is absorbed once the quadratic
+    is fitted: the cubic's group is the cubic alone; at the default 0.05 it holds mix."""
+    assert diagnose(group_design()).groups[1] == ("cubic", "mix")
+    d = diagnose(group_design(), absorbed=0.7)
+    assert d.named == ["quadratic", "cubic"] and d.groups[1] == ("cubic",)
+    assert d.absorbed == ["mix"]
+
+
+def test_the_final_groups_use_the_power_given():
+    """The cubic's bound b is set so that b^2 (its largest noncentrality, |C| = 1) lies
+    between lambda0 at power 0.5 and at 0.8 (geometric mean): at power 0.5 it is testable,
+    named, and its final group holds mix; at 0.8 it is undetectable and mix is named instead."""
+    problem = group_design()
+    fit = fit_model(problem, ("quadratic",))
+    lam = [analyse_candidates(problem, fit, power=power)[1].lambda0 for power in (0.5, 0.8)]
+    bound = (lam[0] * lam[1]) ** 0.25
+    assert lam[0] < bound**2 < lam[1] and bound > 5.0
+    d = diagnose(group_design(bound), power=0.5)
+    assert d.named == ["quadratic", "cubic"] and d.groups[1] == ("cubic", "mix")
+    assert d.confounded[1].correlation == {"mix": pytest.approx(1.0, abs=1e-9)}
+    assert diagnose(group_design(bound)).named == ["quadratic", "mix"]
