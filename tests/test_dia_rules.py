@@ -782,3 +782,46 @@ def test_the_final_groups_use_the_power_given():
     assert d.named == ["quadratic", "cubic"] and d.groups[1] == ("cubic", "mix")
     assert d.confounded[1].correlation == {"mix": pytest.approx(1.0, abs=1e-9)}
     assert diagnose(group_design(bound)).named == ["quadratic", "mix"]
+
+
+# --- the minimal parametrisation ---------------------------------------------------------------
+
+
+def test_the_stand_in_with_fewest_parameters_counting_its_partner_then_smallest_p_value():
+    """Winner W spans orthonormal P1, P2, P3; the data are 10 P1 + 10 P2. Stand-ins inside W:
+    'one' (P1) explains W's signal only with 'two_b' (P2) beside it, 2 parameters in all;
+    'pair' (P1, P2) alone, also 2 parameters, with the smaller p-value (chi2(2) at 200 against
+    chi2(1) at 100), so it is chosen; 'twin' (the same columns as pair) ties with it exactly
+    and the first one found stays."""
+    P1, P2, P3 = bend_basis(3, 13)
+    y = 0.3 + 0.5 * X + 10.0 * P1 + 10.0 * P2 + noise(X**2, P1, P2, P3)
+    problem = linear(y, {"W": {"w1": P1, "w2": P2, "w3": P3}, "one": {"o": P1},
+                         "pair": {"p1": P1, "p2": P2}, "twin": {"t1": P1, "t2": P2},
+                         "two_b": {"e": P2}})
+    fit = fit_model(problem, ())
+    W, one, pair, twin, extra = analyse_candidates(problem, fit)
+    assert stats.chi2.logsf(200.0, 2) < stats.chi2.logsf(100.0, 1)
+    assert pair.log_p == twin.log_p < one.log_p
+    got = engine.minimal_member(W, [one, pair, twin], [extra], fit.residual)
+    assert got is pair
+    assert engine.minimal_member(W, [one], [extra], fit.residual) is one
+    assert engine.minimal_member(W, [one], [], fit.residual) is None
+
+
+@pytest.mark.parametrize(("confounded", "stands_in"), [(0.9, True), (0.99, False)])
+def test_a_stand_in_must_lie_inside_the_winner_at_the_level_given(confounded, stands_in):
+    """Winner W spans P1, P2; 'near' = 0.95 P1 + 0.312 P3 (canonical correlation 0.95 with
+    W's space) and the data 5 P1: fitted instead, near leaves chi-square 25 (1 - 0.95^2) = 2.4 in
+    W's columns (below chi2_{0.99}(2) = 9.2), so it stands in at the level 0.9, not at 0.99."""
+    P1, P2, P3 = bend_basis(3, 13)
+    near = 0.95 * P1 + math.sqrt(1.0 - 0.95**2) * P3
+    y = 0.3 + 0.5 * X + 5.0 * P1 + noise(X**2, P1, P2, P3)
+    problem = linear(y, {"W": {"w1": P1, "w2": P2}, "near": {"n": near}})
+    fit = fit_model(problem, ())
+    W, inner = analyse_candidates(problem, fit)
+    assert engine.canonical_correlation(W, inner) == pytest.approx(0.95, rel=1e-9)
+    left = chi2_of(y, near)[0] - chi2_of(y, near, P1, P2)[0]
+    assert left == pytest.approx(25.0 * (1.0 - 0.95**2), rel=1e-9)
+    assert left < stats.chi2.isf(0.01, 2) / 3.0
+    got = engine.minimal_member(W, [inner], [], fit.residual, confounded=confounded)
+    assert (got is inner) is stands_in
