@@ -825,3 +825,28 @@ def test_a_stand_in_must_lie_inside_the_winner_at_the_level_given(confounded, st
     assert left < stats.chi2.isf(0.01, 2) / 3.0
     got = engine.minimal_member(W, [inner], [], fit.residual, confounded=confounded)
     assert (got is inner) is stands_in
+
+
+def test_only_candidates_testable_at_the_step_are_tried_instead_of_flagged_observations():
+    """A and B 10 sigma off and one candidate, 'cube' (k^3 at A and B): its column at k = 0 is
+    zero, so it is never testable (undetectable beside the line, absorbed by the shifts) and not
+    among the effects tried instead of them, though fitted it would take them exactly and
+    lower Akaike's criterion: both observations stay flagged."""
+    y = 0.3 + 0.5 * X + 10.0 * ENDS + noise(np.eye(N)[A_ROW], np.eye(N)[B_ROW])
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        return y - p("a") - p("b") * X - p("k") ** 3 * ENDS
+
+    obs = tuple((f"P{i}", i, (i,)) for i in range(N))
+    problem = Problem("toy", LINE, (Effect("cube", ("k",), ((-10.0, 10.0),), (1e-4,)),),
+                      residuals, {"a": 0.0, "b": 0.0}, observations=obs)
+    d = diagnose(problem)
+    assert [t.status for s in d.steps for t in s.tests] == ["undetectable"] * 2 + ["absorbed"]
+    assert d.named == [] and sorted(t.name for t in d.outliers) == sorted(
+        [f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"])
+    assert d.after.chi2 == pytest.approx(chi2_of(y, np.eye(N)[A_ROW], np.eye(N)[B_ROW])[0],
+                                         rel=1e-9)
+    cube = fit_model(with_outliers(problem), ("cube",), {"a": 0.0, "b": 0.0, "k": 2.0})
+    assert cube.chi2 + 2.0 * 3 < d.after.chi2 + 2.0 * 4
