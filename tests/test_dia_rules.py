@@ -850,3 +850,22 @@ def test_only_candidates_testable_at_the_step_are_tried_instead_of_flagged_obser
                                          rel=1e-9)
     cube = fit_model(with_outliers(problem), ("cube",), {"a": 0.0, "b": 0.0, "k": 2.0})
     assert cube.chi2 + 2.0 * 3 < d.after.chi2 + 2.0 * 4
+
+
+@pytest.mark.parametrize(("alpha", "absorbed", "partner"),
+                         [(0.01, 0.05, False), (0.001, 0.05, True), (0.01, 0.5, True)])
+def test_the_partner_test_uses_the_levels_given(alpha, absorbed, partner):
+    """Orthonormal P1, P2 beside the line; A = P1, B = 0.95 P1 + 0.312 P2 (canonical
+    correlation 0.95), the data s P1 with s^2 (1 - 0.95^2) = 8.5: B, fitted instead, leaves
+    chi-square 8.5 in A's column, significant at 0.01 (6.63: the data separate them), not at
+    0.001 (10.8: B is A's partner). With absorbed = 0.5, A's column keeps 0.31 < 0.5 of its
+    norm beside B: B explains it whatever the statistic, and is a partner."""
+    P1, P2 = bend_basis(2, 17)
+    s = math.sqrt(8.5 / (1.0 - 0.95**2))
+    y = 0.3 + 0.5 * X + s * P1 + noise(X**2, P1, P2)
+    B = 0.95 * P1 + math.sqrt(1.0 - 0.95**2) * P2
+    assert chi2_of(y, B)[0] - chi2_of(y, B, P1)[0] == pytest.approx(8.5, rel=1e-9)
+    assert stats.chi2.isf(0.01, 1) < 8.5 < stats.chi2.isf(0.001, 1)
+    d = diagnose(linear(y, {"A": {"a1": P1}, "B": {"b1": B}}), alpha=alpha, absorbed=absorbed)
+    group = ("A", "B") if partner else ("A",)
+    assert d.named == ["A"] and d.steps[0].group == group and d.groups == [group]
