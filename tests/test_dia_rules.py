@@ -102,7 +102,7 @@ def test_one_effect_replaces_flagged_shifts_only_where_akaike_prefers_it(left, r
     np.testing.assert_allclose(alt.values, coef, rtol=1e-7)
 
 
-def kink_problem():
+def kink_problem(eps=0.05):
     """A nonlinear effect: ``k eps u + k^3 (e_A + e_B)``. At k = 0 its column is ``eps u``
     (zero at A and B), so the linearised test cannot see the two observations where it is
     largest: they are flagged first. The data are this effect at k0 = 10^(1/3) (A and B 10
@@ -111,7 +111,7 @@ def kink_problem():
     u[[A_ROW, B_ROW]] = 0.0
     u -= np.column_stack([ONE, X]) @ np.linalg.lstsq(np.column_stack([ONE, X]), u, rcond=None)[0]
     u[[A_ROW, B_ROW]] = 0.0
-    eps, k0 = 0.05, 10.0 ** (1.0 / 3.0)
+    k0 = 10.0 ** (1.0 / 3.0)
     y = 0.3 + 0.5 * X + k0 * eps * u + k0**3 * ENDS \
         + noise(u, np.eye(N)[A_ROW], np.eye(N)[B_ROW], seed=1)
 
@@ -869,3 +869,34 @@ def test_the_partner_test_uses_the_levels_given(alpha, absorbed, partner):
     d = diagnose(linear(y, {"A": {"a1": P1}, "B": {"b1": B}}), alpha=alpha, absorbed=absorbed)
     group = ("A", "B") if partner else ("A",)
     assert d.named == ["A"] and d.steps[0].group == group and d.groups == [group]
+
+
+def test_a_flagged_observation_an_effect_named_later_explains_is_dropped():
+    """The kink acting at B only (``k eps u + k^3 e_B``, eps = 0.25: its linearised statistic
+    about 50, B's about 100): B is flagged first, then the kink is named, and fitted (k = 10^(1/3)
+    exactly) it leaves B's shift at zero: the shift is dropped (Wald p = 1) and no observation
+    stays flagged. The final model is lstsq's on the line at that k."""
+    u = 3.0 * np.sin(7.0 * X)
+    u[B_ROW] = 0.0
+    u -= np.column_stack([ONE, X]) @ np.linalg.lstsq(np.column_stack([ONE, X]), u, rcond=None)[0]
+    u[B_ROW] = 0.0
+    eps, k0 = 0.25, 10.0 ** (1.0 / 3.0)
+    spike = np.eye(N)[B_ROW]
+    y = 0.3 + 0.5 * X + k0 * eps * u + 10.0 * spike + noise(u, spike, seed=1)
+
+    def residuals(v):
+        k = np.asarray(v.get("k", 0.0), float)
+        return y - v.get("a", 0.0) - v.get("b", 0.0) * X - k * eps * u - k**3 * spike
+
+    obs = tuple((f"P{i}", i, (i,)) for i in range(N))
+    problem = Problem("toy", LINE, (Effect("kink", ("k",), ((-10.0, 10.0),), (1e-4,)),),
+                      residuals, {"a": 0.0, "b": 0.0}, observations=obs)
+    d = diagnose(problem)
+    flagged = f"outlier:P{B_ROW}"
+    first = {t.name: t.statistic for t in (*d.steps[0].tests, *d.steps[0].snoop)}
+    assert 40.0 < first["kink"] < 60.0 < 90.0 < first[flagged]
+    assert [s.winner for s in d.steps] == [flagged, "kink", None]
+    assert d.named == ["kink"] and d.outliers == []
+    assert list(d.dropped) == [flagged] and d.dropped[flagged] == pytest.approx(1.0, abs=1e-6)
+    assert d.after.effects == ("line", "kink") and d.after.params["k"] == pytest.approx(k0)
+    assert d.after.chi2 == pytest.approx(chi2_of(y - k0 * eps * u - 10.0 * spike)[0], rel=1e-6)
