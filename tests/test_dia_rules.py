@@ -900,3 +900,24 @@ def test_a_flagged_observation_an_effect_named_later_explains_is_dropped():
     assert list(d.dropped) == [flagged] and d.dropped[flagged] == pytest.approx(1.0, abs=1e-6)
     assert d.after.effects == ("line", "kink") and d.after.params["k"] == pytest.approx(k0)
     assert d.after.chi2 == pytest.approx(chi2_of(y - k0 * eps * u - 10.0 * spike)[0], rel=1e-6)
+
+
+@pytest.mark.parametrize(("confounded", "named"), [(0.9, "near"), (0.99, "W")])
+def test_a_whole_diagnosis_takes_a_stand_in_at_the_containment_level_given(confounded, named):
+    """Winner W spans P1, P2, the data 5 P1 + 2 P2 (noise of norm^2 43); 'near' =
+    0.95 P1 + 0.312 P3 has the larger p-value (chi2(1) at 22.6 against chi2(2) at 29) and,
+    fitted instead, leaves 6.4 in W's columns (below chi2_{0.99}(2) = 9.2): it stands in for W
+    where the containment level is 0.9 (the default), not at 0.99 (their canonical correlation
+    is 0.95)."""
+    P1, P2, P3 = bend_basis(3, 13)
+    near = 0.95 * P1 + math.sqrt(1.0 - 0.95**2) * P3
+    e = noise(X**2, P1, P2, P3)
+    y = 0.3 + 0.5 * X + 5.0 * P1 + 2.0 * P2 + math.sqrt(43.0) * e / np.linalg.norm(e)
+    # misfit before (43 + 29 above chi2_{0.99}(38) = 61.2), none after (43 + 6.4 below 59.9)
+    assert chi2_of(y)[0] == pytest.approx(72.0, rel=1e-9)
+    left = chi2_of(y, near)[0] - chi2_of(y, near, P1, P2)[0]
+    assert left == pytest.approx(25.0 * (1.0 - 0.95**2) + 4.0, rel=1e-9)
+    assert stats.chi2.logsf(29.0, 2) < stats.chi2.logsf(25.0 * 0.95**2, 1)
+    d = diagnose(linear(y, {"W": {"w1": P1, "w2": P2}, "near": {"n": near}}),
+                 confounded=confounded)
+    assert d.steps[0].winner == named and d.named == [named]
