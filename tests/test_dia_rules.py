@@ -921,3 +921,24 @@ def test_a_whole_diagnosis_takes_a_stand_in_at_the_containment_level_given(confo
     d = diagnose(linear(y, {"W": {"w1": P1, "w2": P2}, "near": {"n": near}}),
                  confounded=confounded)
     assert d.steps[0].winner == named and d.named == [named]
+
+
+def test_a_named_effect_undetectable_beside_the_rest_is_a_group_of_its_own():
+    """A = P1 (bound 12.5) named first; B = (0.9165 P1 + 0.4 P2, P3) second: beside B, A keeps
+    0.4 of its column, so its largest noncentrality is (12.5 0.4)^2 = 25, below lambda0, while
+    its Wald test given B (estimate 11.25, standard error 1 / 0.4: T = 20.25) keeps it in the
+    model. Refitted without A, A's own test is undetectable: its group is A alone."""
+    P1, P2, P3 = bend_basis(3, 23)
+    b1 = math.sqrt(1.0 - 0.4**2) * P1 + 0.4 * P2
+    y = 0.3 + 0.5 * X + 11.25 * P1 + 10.0 * b1 + noise(X**2, P1, P2, P3)
+    problem = linear(y, {"A": {"ka": P1}, "B": {"kb": b1, "kc": P3}},
+                     bounds={"ka": (-12.5, 12.5)})
+    alone = analyse_candidates(problem, fit_model(problem, ("B",)))[0]
+    assert alone.status == "undetectable" and alone.retained["ka"] == pytest.approx(0.4)
+    assert alone.lambda0 > 1.2 * 25.0  # reach 25, more than 20 % below
+    d = diagnose(problem)
+    assert d.named == ["A", "B"] and d.dropped == {} and d.swaps == []
+    _, coef, cov = chi2_of(y, P1, b1, P3)
+    assert coef[2] ** 2 / cov[2, 2] == pytest.approx(20.25, rel=1e-9)
+    assert d.after.chi2 == pytest.approx(chi2_of(y, P1, b1, P3)[0], rel=1e-9)
+    assert d.confounded[0] == engine.Group("A", ("A",)) and d.groups[0] == ("A",)
