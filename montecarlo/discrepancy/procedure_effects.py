@@ -336,7 +336,10 @@ def simulate(layout: MirrorData, truth: Mapping[str, float], noise: Noise,
     n_point = pd.measured.size + 2
     rolls = noise.mount_roll * rng.standard_normal(n_point)
     plain = dataclasses.replace(layout, ins_roll=None)
-    heading, pitch = reported_attitudes(truth, plain, side, rolls)
+    # the INS autocollimates on the true normals: the collimation changes only what the
+    # theodolite reads (below), not where the mirrors are
+    seen = {k: v for k, v in truth.items() if k != "theodolite_c"}
+    heading, pitch = reported_attitudes(seen, plain, side, rolls)
     heading = heading + noise.ins_heading * rng.standard_normal(n_point)
     pitch = pitch + noise.ins_pitch * rng.standard_normal(n_point)
     _, _, rows = _pointings(truth, plain, side)
