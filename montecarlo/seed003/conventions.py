@@ -124,7 +124,7 @@ def mirror_image(data: ProcedureData) -> ProcedureData:
                                ins_az=-np.asarray(data.ins_az), ins_roll=roll)
 
 
-def _decide(name: str, chi2: Mapping[str, float], stated: str, forced: str | None,
+def decide(name: str, chi2: Mapping[str, float], stated: str, forced: str | None,
             scale: float, reason_if_equal: str) -> Choice:
     best = min(chi2, key=chi2.__getitem__)
     worst = max(chi2, key=chi2.__getitem__)
@@ -195,7 +195,7 @@ def fit_with_conventions(data: ProcedureData, *, side: str = "auto", sense: str 
         sense_choice = Choice("azimuth_sense", sense, sense, sense_chi2, False,
                               "stated, not compared")
     else:
-        sense_choice = _decide("azimuth_sense", sense_chi2, STATED_SENSE, None, scale,
+        sense_choice = decide("azimuth_sense", sense_chi2, STATED_SENSE, None, scale,
                                "the azimuth mirrors cannot tell the senses apart")
     sn = sense_choice.chosen
     if kwargs.get("free_roll"):
@@ -207,7 +207,7 @@ def fit_with_conventions(data: ProcedureData, *, side: str = "auto", sense: str 
     else:
         side_fits = {sd: by_sense[sd, sn] for sd in SIDES}
     side_chi2 = {sd: side_fits[sd][0] for sd in SIDES}
-    side_choice = _decide("roll_mirror", side_chi2,
+    side_choice = decide("roll_mirror", side_chi2,
                           STATED_SIDE if side == "auto" else side,
                           None if side == "auto" else side, scale,
                           "with reference rows the side does not change the fit" if
