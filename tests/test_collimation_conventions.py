@@ -181,7 +181,7 @@ def auto_side_rate(sim: str, side: str, sense: str, n: int, seed: int, tmp_path)
     hits = 0
     for _ in range(n):
         data = procedure_data(make_data(sim, side, sense, rng, tmp_path, mount_roll_deg=1.0))
-        _, _, choice = cv.fit_with_conventions(data)
+        _, _, choice = cv.fit_with_conventions(data, before=False)
         hits += (choice["roll_mirror"].chosen == decidable_side(side, sense)
                  and choice["azimuth_sense"].chosen == "same")
     return hits / n
