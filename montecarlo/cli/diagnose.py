@@ -322,13 +322,15 @@ def _synth_procedure(args: argparse.Namespace) -> int:
     axis = next(c for c in ce.CANDIDATES if c.name == "axis_misalignment")
     candidates = {axis.name: axis, **{c.name: c for c in pe.CANDIDATES}}
     effects = synth.parse_effects(args.effect, candidates, pe.display_unit)
-    at_mdb = synth.parse_multiples(args.at_mdb, {c.name: c for c in pe.CANDIDATES})
+    side = SIDES[args.roll_mirror or "right"]
+    layout = pe.paper_layout(rows, azimuths, pitches, side)
+    at_mdb = synth.parse_multiples(args.at_mdb, {**{c.name: c for c in pe.CANDIDATES},
+                                                 pe.ROLL: pe.roll_effect(layout)})
     ins = args.ins_sigma_arcsec * ARCSEC
     noise = Noise(args.theodolite_sigma_arcsec * ARCSEC, ins, ins, ins,
                   math.radians(args.mount_roll_sigma_deg))
-    side = SIDES[args.roll_mirror or "right"]
     data, truth = synth.synth_procedure(
-        seed=args.seed, layout=pe.paper_layout(rows, azimuths, pitches, side),
+        seed=args.seed, layout=layout,
         frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
         at_mdb=at_mdb, side=side,
         with_roll=args.with_roll or (rows and args.mount_roll_sigma_deg > 0))
