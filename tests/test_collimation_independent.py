@@ -45,8 +45,8 @@ def _fit(tmp_path, case, gamma, lam, rng, noise=2.0, mount_roll=1.0):
     cb.write_csv(path, out)
     data = procedure_data(read_mirror_csv(path, sets=SETS + REFERENCE_SETS))
     sigma = 2.0 * ARCSEC  # the weights; a posteriori sigmas of noise-free data would be zero
-    fit, _, choice = fit_with_conventions(data, free_roll=roll == "free", sigma_ins=sigma,
-                                          sigma_theodolite=sigma, before=False)
+    fit, _, choice = fit_with_conventions(data, sense="same", free_roll=roll == "free",
+                                          sigma_ins=sigma, sigma_theodolite=sigma, before=False)
     if not rows and noise == 0.0:  # noise-free: the side is decided
         assert choice["roll_mirror"].chosen == side
     return fit
