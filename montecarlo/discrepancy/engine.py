@@ -585,9 +585,17 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
         for p, v in win.estimate.items():
             lo, hi = effect.bounds[effect.parameters.index(p)]
             start[p] = float(np.clip(v, lo, hi))
-        fixed |= set(effect.parameters) - set(win.active)
         tested = fit
-        fit = _fit_with_fixed(full, (*fit.effects[1:], win.name), start, fixed)
+        try:
+            fit = _fit_with_fixed(full, (*fit.effects[1:], win.name), start,
+                                  fixed | (set(effect.parameters) - set(win.active)))
+        except (FitError, np.linalg.LinAlgError):
+            # the adapted model is singular with these data (an effect nearly degenerate with
+            # the model, e.g. a roll per pointing with the offsets' direction): not adapted
+            dropped[win.name] = math.nan
+            fit = tested
+            continue
+        fixed |= set(effect.parameters) - set(win.active)
         if is_outlier(win.name):
             outliers.append(win)
             steps.append(Step(tested, tests, win.name, (), snoop))
