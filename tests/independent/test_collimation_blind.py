@@ -1,4 +1,4 @@
-"""Self-checks of collimation_blind.py (run: python -m pytest /work/blind/b003 -q -p no:cacheprovider).
+"""Self-checks of collimation_blind.py (run: python -m pytest tests/independent -q -p no:cacheprovider).
 
 First-order behaviour, derived by hand (reading conventions of the module; s = +1 cw / -1 ccw,
 k = +1 right / -1 left roll mirror; a, e = mirror azimuth relative to the central mirror and
