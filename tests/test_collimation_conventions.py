@@ -254,3 +254,17 @@ def test_no_good_mirror_flagged_with_an_unrecorded_1_degree_roll(sim, side, sens
     _, clean = diagnosis_rates(sim, side, sense, 500, 65, tmp_path, mount_roll_deg=1.0)
     print(f"unrecorded 1 deg roll {sim} {side} {sense}: no mirror flagged {clean:.3f}")
     assert clean >= 0.95
+
+
+def test_a_winner_whose_adapted_model_is_singular_is_not_adapted():
+    """A data set of the blind simulator (left, ccw, rolls at 2 x MDB) on which the model adapted
+    with ``ins_roll`` has a singular normal matrix: the diagnosis must go on without it (it
+    stopped with numpy's LinAlgError) and report it as dropped."""
+    from pathlib import Path
+
+    data = read_mirror_csv(Path(__file__).parent / "data" / "collimation_ins_roll_singular.csv",
+                           sets=SETS + REFERENCE_SETS)
+    turned, s, _ = pe.choose_conventions(data, SIGMA)
+    d = diagnose(pe.procedure_problem(turned, SIGMA, s))
+    assert "ins_roll" in d.dropped and math.isnan(d.dropped["ins_roll"])
+    assert "ins_roll" not in d.named
