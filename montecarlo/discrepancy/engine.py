@@ -26,7 +26,8 @@ snooping, Teunissen's DIA):
    inside the winner's column space with fewer parameters that explains its signal (alone or
    with one other candidate) is adapted instead: the group's minimal parametrisation
    (:func:`minimal_member`); the groups reported are those of the final model.
-4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2.
+4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2 (a winner
+   whose adapted model is singular is not adapted but dropped, with p = NaN).
 
 The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the whole chain
 detects and identifies it with probability ``power`` (0.80): the noncentrality ``lambda0`` is the
