@@ -20,6 +20,7 @@ import pandas as pd
 from montecarlo.engine.runner import RunOptions, StudyResult
 from montecarlo.errors import InputError
 from montecarlo.io.files import (
+    FILES_KEY,
     PROVENANCE,
     OutputLock,
     atomic_write_bytes,
@@ -88,16 +89,21 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
     """Draw the plots and write report.md of a result directory again from its saved data.
 
     The new plots are drawn into a temporary directory beside ``plots/`` and swapped in only
-    when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes.
+    when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes. A
+    file the user added to ``plots/`` (not in the result's list of written files) is not
+    deleted: the command refuses. The lock of the result directory is held meanwhile
+    (:class:`montecarlo.io.files.OutputLock`), and the list of written files is brought up to
+    date afterwards.
     """
     path = Path(path)
     result, summary, prov = load_result(path)
     with OutputLock(path):
+        listed = prov.get(FILES_KEY)
         foreign = [rel for rel in foreign_entries(path, prov) or []
-                   if rel == "report.md" or rel.split("/")[0] == "plots"]
+                   if rel.split("/")[0] == "plots" and rel not in (listed or {})]
         if foreign:
             raise InputError(f"{path}: {foreign[0]!r} was not written by `montecarlo run`; "
-                             "move it out of the result before drawing it again")
+                             "move it out of plots/ before drawing them again")
         names = _redraw(path, result, summary, prov, fmt)
         update_written_files(path, ("plots", "report.md"))
     return names, prov
