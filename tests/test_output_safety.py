@@ -124,7 +124,7 @@ def test_a_rerun_keeps_a_file_the_user_added_to_an_earlier_result(tmp_path):
     (out / "plots" / "my_sketch.png").unlink()
     with (out / "report.md").open("a") as f:
         f.write("my conclusions\n")
-    with pytest.raises(InputError, match="report.md"):
+    with pytest.raises(InputError, match=r"report\.md"):
         OutputDir(out, "run", match).check()
     (out / "report.md").unlink()  # a result file the user deleted is no one's loss
     with OutputDir(out, "run", match) as staging:
