@@ -338,8 +338,7 @@ def _check_swept_base_values(path: Path, system: System, raw: dict[str, Any],
     except ValidationError as err:
         for e in err.errors():
             loc = ".".join(str(x) for x in e["loc"])
-            key = next((k for k in given if loc == k or loc.startswith(k + ".")), None)
-            if key is not None:
+            if any(loc == k or loc.startswith(k + ".") for k in given):
                 value = _short(e.get("input"))
                 raise InputError(f"{path}: {loc}: {e['msg']} (got {value}) [the base value, "
                                  "which the sweep replaces: give a valid one or remove it]"
