@@ -5,6 +5,7 @@ import json
 import math
 import subprocess
 import sys
+import textwrap
 
 import numpy as np
 import pandas as pd
@@ -188,3 +189,53 @@ def test_plan_command_prints_and_writes_json(tmp_path):
     done = subprocess.run([sys.executable, "-m", "montecarlo", "plan", str(path),
                            "--level-width", "0.2"], capture_output=True, text=True)
     assert done.returncode == 2 and "--level-width" in done.stderr
+
+
+@pytest.mark.parametrize("spec", [None, {"statistic": "max"}, {"statistic": "std"},
+                                  {"statistic": "p99"}], ids=["no-spec", "max", "std", "p99"])
+def test_every_plan_branch_runs_through_the_command_line(tmp_path, spec):
+    """Without a spec (the p95 is planned), on a max or a std (--coverage picks the quantile
+    of the distribution-free counts; no percentile verdict to decide, the p95's interval is
+    planned) and on a p99 (trials_to_decide from a pilot large enough to bound it): exit 0,
+    one JSON answer, no warning."""
+    text = """
+        [study]
+        name = "plan-branch"
+        system = "ground"
+        trials = 1000
+        seed = 1
+        [sensor]
+        fov_deg = [90.0, 90.0]
+        pixels = [512, 512]
+        [geometry]
+        L_m = 70.0
+        H_m = 1.0
+        [errors]
+        pixel_px = { dist = "normal", sigma = 0.5 }
+        pixel_relation = "common"
+        """
+    if spec is not None:
+        text += f"""
+        [spec]
+        metric = "rotation_angle"
+        statistic = "{spec['statistic']}"
+        limit = 4.5
+        """
+    path = tmp_path / "plan.toml"
+    path.write_text(textwrap.dedent(text))
+    done = subprocess.run([sys.executable, "-m", "montecarlo", "-q", "plan", str(path),
+                           "--trials", "400", "--coverage", "0.9", "--json"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr and "Warning" not in done.stderr
+    data = json.loads(done.stdout)
+    expected = {None: ("p95", 0.95), "max": ("max", 0.9), "std": ("std", 0.9),
+                "p99": ("p99", 0.99)}[spec and spec["statistic"]]
+    assert (data["statistic"], data["quantile"]) == expected
+    assert data["pilot_trials"] == 400
+    assert sorted(p["variant"] for p in data["points"]) == ["normalised", "raw"]
+    for point in data["points"]:
+        if spec is not None and spec["statistic"] == "p99":
+            assert point["trials_to_decide"] >= 400
+        else:
+            assert "trials_to_decide" not in point
