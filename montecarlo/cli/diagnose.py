@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -33,6 +34,7 @@ from montecarlo.units import ARCSEC
 if TYPE_CHECKING:
     from montecarlo.discrepancy.engine import Diagnosis
     from montecarlo.discrepancy.view import SystemView
+    from montecarlo.io.collimation_csv import MirrorData
 
 
 def _unit(unit: str) -> str:
@@ -42,7 +44,7 @@ def _unit(unit: str) -> str:
 def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before any work, a --report directory or --json file that cannot be written."""
     if args.report:
-        OutputDir(args.report, "diagnose").check()
+        OutputDir(args.report, "diagnose", inputs=(Path(args.data),)).check()
     check_json_option(args)
 
 
@@ -64,7 +66,7 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
         from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
         from montecarlo.systems.discrepancy import monte_carlo_gap
 
-        with OutputDir(args.report, "diagnose") as staging:
+        with OutputDir(args.report, "diagnose", inputs=(Path(source),)) as staging:
             mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
                 if args.trials > 0 else None
             write_report(staging, d, view, report, mc, args.trials, args.seed)
@@ -119,11 +121,25 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
         raise InputError("--roll-mirror: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
+    _check_separable(args.data, data)
     try:
         d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+
+
+def _check_separable(path: str, data: MirrorData) -> None:
+    """Refuse mirrors that ``collimation fit --readings absolute`` refuses: its base model
+    (frame heading and the optical-axis offsets) must be determined before any effect is
+    looked for (e.g. mirrors all at one elevation leave axis_az and frame_heading confounded).
+    """
+    from montecarlo.seed003.fit import NotSeparable, fit
+
+    try:
+        fit(data.theodolite_az, data.theodolite_el, data.ins_az, data.ins_el, data.ins_roll)
+    except NotSeparable as exc:
+        raise InputError(f"{path}: {exc}") from None
 
 
 def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:

@@ -392,7 +392,12 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     return StudyResult(study, points, trials, origin, "reference" if reference else "fast")
 
 
-def run_until_decided(study: Study, options: RunOptions, max_trials: int) -> StudyResult:
+DEFAULT_MAX_TRIALS = 1_048_576
+"""Default cap on the trials per grid point of :func:`run_until_decided`."""
+
+
+def run_until_decided(study: Study, options: RunOptions,
+                      max_trials: int = DEFAULT_MAX_TRIALS) -> StudyResult:
     """Run, then double the trials of every sampled grid point whose spec verdict is
     ``undecided`` and run it again, until every verdict is decided or ``max_trials`` is reached.
 
@@ -401,14 +406,24 @@ def run_until_decided(study: Study, options: RunOptions, max_trials: int) -> Stu
     at most twice that of the last round). Decided points keep their result. Checkpoints are
     not used.
 
+    Every round takes the path a direct run of ``study`` takes (:func:`uses_reference`,
+    decided once, before the first round), whatever ``max_trials`` is: each point's result is
+    bit for bit that of a direct run of its final trials on that path
+    (``run --trials N [--reference]``; the result's ``kernel`` says which).
+
     Raises
     ------
     InputError
-        The study has no ``[spec]`` to decide.
+        The study has no ``[spec]`` to decide, or ``max_trials`` is below its trials.
     """
     if study.spec is None:
         raise InputError(f"{study.path}: spec: --until-decided needs a [spec] table to decide")
-    options = replace(options, checkpoint_dir=None)
+    most = max(gp.trials for gp in study.points)
+    if max_trials < most:
+        raise InputError(f"--max-trials: {max_trials:,} is below the study's {most:,} trials "
+                         "per grid point; give at least that many (or fewer --trials)")
+    options = replace(options, checkpoint_dir=None,
+                      reference=uses_reference(study, checked_options(study, options)))
     result = run_study(study, options)
     trials = dict(result.trials)
     while True:

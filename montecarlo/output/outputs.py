@@ -18,7 +18,16 @@ from typing import Any
 import pandas as pd
 
 from montecarlo.engine.runner import RunOptions, StudyResult
-from montecarlo.io.files import PROVENANCE, atomic_write_bytes
+from montecarlo.errors import InputError
+from montecarlo.io.files import (
+    FILES_KEY,
+    PROVENANCE,
+    OutputLock,
+    atomic_write_bytes,
+    foreign_entries,
+    save_figure,
+    update_written_files,
+)
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
@@ -35,8 +44,7 @@ def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
     summary.to_parquet(out_dir / "summary.parquet", index=False)
     histogram_table(result).to_parquet(out_dir / HISTOGRAMS, index=False)
     if result.trials:
-        pd.concat(result.trials.values(), ignore_index=True).to_parquet(
-            out_dir / "trials.parquet", index=False)
+        trials_table(result).to_parquet(out_dir / "trials.parquet", index=False)
     options_record = {k: str(v) if isinstance(v, Path) else v
                       for k, v in asdict(options).items()}
     prov = study_provenance(result, options_record)
@@ -47,12 +55,32 @@ def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
     return out_dir
 
 
+def trials_table(result: StudyResult) -> pd.DataFrame:
+    """The per-trial values of every grid point as ``trials.parquet`` holds them: ``point``,
+    ``trial`` and one column ``<variant>/<metric>_<unit>`` per value, in the metric's display
+    unit as in ``summary.csv`` (mrad, arcsec, ...; no suffix for a ratio or a rate)."""
+    metrics = {m.name: m for _, m in result.study.metrics}
+    frames = []
+    for frame in result.trials.values():
+        out = frame[["point", "trial"]].copy()
+        for col in frame.columns[2:]:
+            metric = metrics[col.rpartition("/")[2]]
+            suffix = "" if metric.unit == "1" else f"_{metric.unit}"
+            out[f"{col}{suffix}"] = frame[col].to_numpy(float) * metric.scale
+        frames.append(out)
+    return pd.concat(frames, ignore_index=True)
+
+
 def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str) -> list[str]:
-    """Save every figure into ``plots`` as ``fmt``; returns the file names."""
+    """Save every figure into ``plots`` as ``fmt`` (the same bytes on every render, see
+    :func:`montecarlo.io.files.figure_bytes`); returns the file names."""
+    import matplotlib.pyplot as plt
+
     names = []
     for name, fig in all_figures(result, summary):
         name = f"{Path(name).stem}.{fmt}"
-        fig.savefig(plots / name, dpi=110)
+        save_figure(fig, plots / name, dpi=110)
+        plt.close(fig)
         names.append(name)
     return names
 
@@ -61,10 +89,28 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
     """Draw the plots and write report.md of a result directory again from its saved data.
 
     The new plots are drawn into a temporary directory beside ``plots/`` and swapped in only
-    when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes.
+    when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes. A
+    file the user added to ``plots/`` (not in the result's list of written files) is not
+    deleted: the command refuses. The lock of the result directory is held meanwhile
+    (:class:`montecarlo.io.files.OutputLock`), and the list of written files is brought up to
+    date afterwards.
     """
     path = Path(path)
     result, summary, prov = load_result(path)
+    with OutputLock(path):
+        listed = prov.get(FILES_KEY)
+        foreign = [rel for rel in foreign_entries(path, prov) or []
+                   if rel.split("/")[0] == "plots" and rel not in (listed or {})]
+        if foreign:
+            raise InputError(f"{path}: {foreign[0]!r} was not written by `montecarlo run`; "
+                             "move it out of plots/ before drawing them again")
+        names = _redraw(path, result, summary, prov, fmt)
+        update_written_files(path, ("plots", "report.md"))
+    return names, prov
+
+
+def _redraw(path: Path, result: StudyResult, summary: pd.DataFrame, prov: dict[str, Any],
+            fmt: str) -> list[str]:
     for stale in [*path.glob(".plots.tmp-*"), *path.glob(".plots.old-*")]:  # a killed rerun's
         shutil.rmtree(stale, ignore_errors=True)
     staging = Path(tempfile.mkdtemp(prefix=".plots.tmp-", dir=path))
@@ -83,4 +129,4 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
     finally:
         if staging.exists():
             shutil.rmtree(staging)
-    return names, prov
+    return names
