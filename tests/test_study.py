@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from montecarlo.cli import main
+from montecarlo.errors import InputError
 from montecarlo.systems import load_study
 
 STUDIES = sorted(Path(__file__).parent.parent.glob("studies/*.toml"))
@@ -155,3 +156,18 @@ def test_real_process_exit_code(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "geometry.L_m" in out.stderr
+
+
+def test_an_errors_file_updates_the_study_errors_key_by_key(tmp_path):
+    """``--errors FILE``: the file's [errors] keys replace the study's, the others stay."""
+    from montecarlo.engine.study import merge_errors_file
+
+    raw = {"study": {"name": "s"}, "errors": {"pixel_px": 0.3, "dx_m": 0.1}}
+    path = tmp_path / "e.toml"
+    path.write_text('[errors]\npixel_px = { dist = "normal", sigma = 0.8 }\n')
+    merged = merge_errors_file(raw, path)
+    assert merged["errors"] == {"pixel_px": {"dist": "normal", "sigma": 0.8}, "dx_m": 0.1}
+    assert raw["errors"]["pixel_px"] == 0.3  # the study given is not changed
+    path.write_text('[errors]\npixel_px = 0.5\n[geometry]\nL_m = 1.0\n')
+    with pytest.raises(InputError, match=r"e.toml: .*nothing else \(got: geometry\)"):
+        merge_errors_file(raw, path)

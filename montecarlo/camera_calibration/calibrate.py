@@ -128,7 +128,7 @@ def pose_from_homography(K: FloatArray, H: FloatArray) -> tuple[FloatArray, Floa
 
 
 def closed_form(points: ArrayLike, image: ArrayLike, view: ArrayLike, n_views: int
-                ) -> dict[str, object]:
+                ) -> dict[str, FloatArray]:
     """Zhang's closed-form intrinsics and poses: ``{"K", "rvec" (V, 3), "tvec" (V, 3)}``."""
     points, image, view = np.asarray(points, float), np.asarray(image, float), np.asarray(view)
     Hs = [homography(points[view == v], image[view == v]) for v in range(n_views)]

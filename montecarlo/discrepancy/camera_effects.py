@@ -23,7 +23,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from montecarlo.camera_calibration.calibrate import closed_form, pose_names, poses_of
 from montecarlo.camera_calibration.model import project
@@ -94,7 +94,7 @@ def camera_problem(data: CameraData, pixel_sigma: float) -> Problem:
     names = (*base.parameters, *(p for c in CANDIDATES for p in c.parameters))
     observed = data.pixels
 
-    def predict(values: Mapping[str, float]) -> FloatArray:
+    def predict(values: Mapping[str, ArrayLike]) -> FloatArray:
         r, t = poses_of(values, n_views)
         return project(values, r, t, data.points, data.view)
 
@@ -173,7 +173,8 @@ def pixel_error(d: Diagnosis, data: CameraData, pixel_sigma: float) -> dict[str,
     final = {t.name: t for t in d.steps[-1].tests}
     for name in DISTORTION_CANDIDATES:
         t = final.get(name)
-        if t is None or t.status not in ("testable", "undetectable") or not t.mdb:
+        if t is None or t.status not in ("testable", "undetectable") or not t.mdb \
+                or t.projected is None:
             continue
         for j, mdb in enumerate(t.mdb.values()):
             # projected: what the final model, refitted, cannot absorb of the effect

@@ -37,16 +37,14 @@ def practical_significance(d: Diagnosis, view: SystemView,
     ``reported`` selects the parameters whose changes count (names, or a predicate; default:
     every parameter of the final model except observation shifts).
     """
+    keep: Callable[[str], bool]
     if reported is None:
-        def keep(name: str) -> bool:
-            return not is_outlier(name)
+        keep = lambda name: not is_outlier(name)  # noqa: E731
     elif callable(reported):
         keep = reported
     else:
         names = set(reported)
-
-        def keep(name: str) -> bool:
-            return name in names
+        keep = names.__contains__
 
     full = with_outliers(d.problem)
     after = d.after
