@@ -103,6 +103,7 @@ VALID_STUDY = "studies/valid_ground.toml"
 VALID_COL = "csv/valid_collimation.csv"
 VALID_GROUND = "csv/valid_ground.csv"
 VALID_STAB = "csv/valid_stabilization.csv"
+CAM_MODEL, CAM_VIEWS = "valid_camera_model.csv", "valid_camera_views.csv"
 
 CASES: list[Case] = [
     # ------------------------------------------------------------------ study files (run)
@@ -637,6 +638,49 @@ CASES: list[Case] = [
     csv_case("stabilization-csv-binary-file", ESTIMATE, "binary.csv", "not a readable CSV"),
     Case("stabilization-csv-is-directory", ("stabilization", "estimate", "csvdir"),
          setup={"csvdir": None}, expect=("csvdir", "directory")),
+
+    # ------------------------------------------------------------------ CSV: diagnose camera
+    *[Case(f"camera-{id}", ("diagnose", "camera", model, views, "--pixel-sigma-px", "0.2",
+                            "--report", "report", "--emit-errors", "e.toml"),
+           files=(f"csv/{model}", f"csv/{views}"), expect=expect, absent=("report", "e.toml"))
+      for id, model, views, expect in (
+          ("model-unknown-unit", "camera_model_unknown_unit.csv", CAM_VIEWS,
+           ("camera_model_unknown_unit.csv", "row 6", "'unit'", "'furlong'")),
+          ("model-mixed-units", "camera_model_mixed_unit.csv", CAM_VIEWS,
+           ("camera_model_mixed_unit.csv", "row 9", "'unit'", "'cm'")),
+          ("model-repeated-id", "camera_model_repeated_id.csv", CAM_VIEWS,
+           ("camera_model_repeated_id.csv", "row 4", "'id'", "'2'")),
+          ("model-nan-x", "camera_model_nan_x.csv", CAM_VIEWS,
+           ("camera_model_nan_x.csv", "row 7", "'X'", "'nan'")),
+          ("model-missing-column", "camera_model_missing_column.csv", CAM_VIEWS,
+           ("camera_model_missing_column.csv", "'Y'")),
+          ("views-unknown-id", CAM_MODEL, "camera_views_unknown_id.csv",
+           ("camera_views_unknown_id.csv", "row 12", "'id'", "'99'")),
+          ("views-repeated-point", CAM_MODEL, "camera_views_repeated_point.csv",
+           ("camera_views_repeated_point.csv", "row 14", "'id'", "'12'", "'V1'")),
+          ("views-non-numeric-u", CAM_MODEL, "camera_views_non_numeric_u.csv",
+           ("camera_views_non_numeric_u.csv", "row 20", "'u'", "'12px'")),
+          ("views-two-views", CAM_MODEL, "camera_views_two_views.csv",
+           ("camera_views_two_views.csv", "'view'", "2 views")),
+          ("views-view-with-three-points", CAM_MODEL, "camera_views_view_with_three_points.csv",
+           ("camera_views_view_with_three_points.csv", "row 34", "'view'", "'V3'", "3 points")),
+      )],
+    Case("camera-pixel-sigma-zero", ("diagnose", "camera", CAM_MODEL, CAM_VIEWS,
+                                     "--pixel-sigma-px", "0"),
+         files=(f"csv/{CAM_MODEL}", f"csv/{CAM_VIEWS}"), expect=("--pixel-sigma-px", "'0'")),
+    Case("camera-emit-errors-into-missing-directory",
+         ("diagnose", "camera", CAM_MODEL, CAM_VIEWS, "--pixel-sigma-px", "0.2",
+          "--emit-errors", "nodir/e.toml"),
+         files=(f"csv/{CAM_MODEL}", f"csv/{CAM_VIEWS}"), expect=("nodir/e.toml",),
+         absent=("nodir",)),
+    Case("run-errors-file-with-a-study-table", ("run", "valid_ground.toml", "--errors",
+                                                "errors_extra_table.toml", "--quiet"),
+         files=(VALID_STUDY, "studies/errors_extra_table.toml"),
+         expect=("errors_extra_table.toml", "[errors]", "study"), absent=("results",)),
+    Case("size-errors-file-negative-sigma", ("size", "--limit", "3", "--errors",
+                                             "errors_negative_sigma.toml"),
+         files=("studies/errors_negative_sigma.toml",),
+         expect=("errors_negative_sigma.toml", "errors.pixel_px", "-0.3"), absent=("results",)),
 
     # ------------------------------------------------------------------ CSV: budget --from-sizing
     csv_case("budget-answers-missing-relation-column", ("budget", *BUDGET_CHEAP, "--from-sizing"),

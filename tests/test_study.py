@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from montecarlo.cli import main
+from montecarlo.errors import InputError
 from montecarlo.systems import load_study
 
 STUDIES = sorted(Path(__file__).parent.parent.glob("studies/*.toml"))
@@ -199,3 +200,18 @@ def test_grid_size_is_counted_before_expanding_and_limited_by_max_points(tmp_pat
     assert time.monotonic() - start < 5.0
     assert f"1,000,000 grid points (about 150 GB of memory) exceed the limit of {MAX_POINTS:,}" \
         in capsys.readouterr().err
+
+
+def test_an_errors_file_updates_the_study_errors_key_by_key(tmp_path):
+    """``--errors FILE``: the file's [errors] keys replace the study's, the others stay."""
+    from montecarlo.engine.study import merge_errors_file
+
+    raw = {"study": {"name": "s"}, "errors": {"pixel_px": 0.3, "dx_m": 0.1}}
+    path = tmp_path / "e.toml"
+    path.write_text('[errors]\npixel_px = { dist = "normal", sigma = 0.8 }\n')
+    merged = merge_errors_file(raw, path)
+    assert merged["errors"] == {"pixel_px": {"dist": "normal", "sigma": 0.8}, "dx_m": 0.1}
+    assert raw["errors"]["pixel_px"] == 0.3  # the study given is not changed
+    path.write_text('[errors]\npixel_px = 0.5\n[geometry]\nL_m = 1.0\n')
+    with pytest.raises(InputError, match=r"e.toml: .*nothing else \(got: geometry\)"):
+        merge_errors_file(raw, path)

@@ -30,9 +30,20 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     from montecarlo.engine.study import read_study_file
     from montecarlo.systems import study_from_dict
 
+    errors = getattr(args, "errors", None)
     if args.study is None:
-        return sizing_problem.DEFAULT_DESIGN, None
+        if errors is None:
+            return sizing_problem.DEFAULT_DESIGN, None
+        from montecarlo.engine.study import merge_errors_file
+
+        raw = merge_errors_file(sizing_problem.DEFAULT_DESIGN, errors)
+        study_from_dict(raw, errors)  # a bad value named, before any work
+        return raw, None
     raw = read_study_file(args.study)
+    if errors is not None:
+        from montecarlo.engine.study import merge_errors_file
+
+        raw = merge_errors_file(raw, errors)
     study = study_from_dict(raw, args.study)  # every mistake named in the file, before any work
     if study.header.system != "ground":
         raise InputError(f"{args.study}: study.system: sizing and budgets need a ground study "
@@ -67,6 +78,8 @@ def _cmd_size(args: argparse.Namespace) -> int:
                             float_of("--vary", name, hi if sep else lo))
     else:
         bounds = dict(sizing_problem.DEFAULT_BOUNDS)
+        if args.errors:  # the pixel error is known: no longer a knob
+            bounds.pop("pixel_px")
     unknown = set(weights) - set(bounds)
     if unknown:
         raise InputError(f"--weight: {', '.join(sorted(unknown))} is not a varied knob")
@@ -242,6 +255,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--confirm-seed", type=nonnegative_int,
                    help="seed of the independent confirmation run (default seed + 1)")
     p.add_argument("--no-confirm", action="store_true", help="skip the confirmation run")
+    p.add_argument("--errors", metavar="FILE.toml", help="update the base design's [errors] "
+                   "from this file (e.g. diagnose camera --emit-errors); pixel_px is then fixed "
+                   "unless --vary names it")
     p.add_argument("--out", default="results/sizing", help="output directory")
     p.set_defaults(func=_cmd_size)
 

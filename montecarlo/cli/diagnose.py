@@ -1,4 +1,4 @@
-"""The discrepancy workflow: ``diagnose ground | collimation | stabilization``,
+"""The discrepancy workflow: ``diagnose ground | collimation | stabilization | camera``,
 ``synth ground | collimation``."""
 
 from __future__ import annotations
@@ -169,6 +169,93 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
         return 0
     print(format_text(report))
+    return 0
+
+
+RMS_CONVENTION = ("rms is per image coordinate (u and v pooled); the rms of the 2-D residual "
+                  "of a point is sqrt(2) times larger")
+
+
+def camera_summary(d: Diagnosis) -> dict[str, dict[str, float]]:
+    """The final model's camera in Zhang's terms: alpha = f, beta = f (1 + a), gamma, u0, v0
+    [px] and the distortion terms, each with its standard error."""
+    p, cov, names = d.after.params, d.after.covariance, d.after.names
+    se = d.after.stderr
+    out = {"alpha": {"value": p["f"], "stderr": se["f"], "unit": "px"}}
+    a = p.get("a", 0.0)
+    grad = np.zeros(len(names))
+    grad[names.index("f")] = 1.0 + a
+    if "a" in names:
+        grad[names.index("a")] = p["f"]
+    out["beta"] = {"value": p["f"] * (1.0 + a), "stderr": float(np.sqrt(grad @ cov @ grad)),
+                   "unit": "px"}
+    for key, name, unit in (("gamma", "gamma", "px"), ("u0", "cx", "px"), ("v0", "cy", "px"),
+                            ("k1", "k1", "1"), ("k2", "k2", "1"), ("k3", "k3", "1"),
+                            ("p1", "p1", "1"), ("p2", "p2", "1")):
+        out[key] = {"value": p.get(name, 0.0), "stderr": se.get(name, 0.0), "unit": unit}
+    return out
+
+
+def _cmd_diagnose_camera(args: argparse.Namespace) -> int:
+    from montecarlo.camera_calibration.calibrate import CalibrationError
+    from montecarlo.discrepancy import camera_effects as cam
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.fit import FitError
+    from montecarlo.discrepancy.significance import format_significance, practical_significance
+    from montecarlo.discrepancy.view import format_text, to_json
+    from montecarlo.io.camera_csv import read_camera_csv
+    from montecarlo.io.files import atomic_write_bytes
+    from montecarlo.output.provenance import provenance
+
+    _check_outputs(args)
+    if args.emit_errors:
+        writable_file(args.emit_errors)
+    data = read_camera_csv(args.model, args.views)
+    source = f"{args.model}, {args.views}"
+    sigma = args.pixel_sigma_px
+    try:
+        d = diagnose(cam.camera_problem(data, sigma), args.alpha)
+    except (FitError, CalibrationError) as exc:
+        raise InputError(f"{args.views}: {exc}") from None
+    view = cam.report_view(data, sigma)
+    report = to_json(d, view, source)
+    significance = practical_significance(d, view, cam.INTRINSIC_REPORTED)
+    error = cam.pixel_error(d, data, sigma)
+    report.update({"rms_convention": RMS_CONVENTION, "camera": camera_summary(d),
+                   "practical_significance": significance, "pixel_error": error})
+    camera = report["camera"]
+    lines = [format_text(report), "", RMS_CONVENTION,
+             "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
+                 f"{k} = {v['value']:.6g} ± {v['stderr']:.2g}{_unit(v['unit'])}"
+                 for k, v in camera.items() if v["stderr"] > 0),
+             format_significance(significance),
+             f"pixel error left: sigma u {error['sigma_u']:.4f} px, v {error['sigma_v']:.4f} px;"
+             f" remaining distortion up to {error['distortion_bound']:.4f} px "
+             f"({error['distortion_source'] or 'none tested'}, at its MDB)"]
+    text = "\n".join(lines)
+    record = {"model": str(args.model), "views": str(args.views), "alpha": args.alpha,
+              "pixel_sigma_px": sigma}
+    if args.report:
+        from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
+
+        with OutputDir(args.report, "diagnose") as staging:
+            write_report(staging, d, view, report)
+            atomic_write_bytes(Path(staging) / "report.md", "\n".join(
+                ["# Diagnosis", "", "```", text, "```", "", "![residuals](residuals.png)", "",
+                 "![gap](gap.png)", ""]).encode())
+            write_provenance(staging, "diagnose", **record)
+    if args.emit_errors:
+        toml = cam.errors_toml(error, source, sigma, d.after.effects)
+        atomic_write_bytes(Path(args.emit_errors), toml.encode())
+    if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
+        return 0
+    print(text)
+    if args.report:
+        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
+              "gap.png)")
+    if args.emit_errors:
+        print(f"pixel error for a ground study written to {args.emit_errors} "
+              "(use: montecarlo size|run ... --errors FILE)")
     return 0
 
 
@@ -411,6 +498,19 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="what a gyro row holds (point)")
     basic(p)
     p.set_defaults(func=_cmd_diagnose_stabilization)
+
+    p = dsub.add_parser("camera", help="camera calibration from a planar target in several "
+                        "views: pinhole against distortion, skew, aspect ratio, bad corners")
+    p.add_argument("model", help="CSV of the target's points: id, X, Y, unit (m, cm, mm, in)")
+    p.add_argument("views", help="CSV of the observed image points: view, id, u, v [px]")
+    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
+                   help="standard deviation of each image coordinate of a corner [px]")
+    p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json, "
+                   "residuals.csv and plots (residuals against radius and image position, gap)")
+    p.add_argument("--emit-errors", metavar="FILE.toml", help="write the [errors] pixel entry "
+                   "of a ground study (for montecarlo size|run --errors)")
+    basic(p)
+    p.set_defaults(func=_cmd_diagnose_camera)
 
     syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
     ssub = syn.add_subparsers(dest="synth_command", required=True, parser_class=Parser)

@@ -34,8 +34,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.io.files import RESULTS_ROOT, OutputDir
     from montecarlo.systems import load_study
 
-    study = load_study(args.study, trials=args.trials, seed=args.seed,
-                       max_points=args.max_points)
+    if args.errors:
+        from montecarlo.engine.study import merge_errors_file, read_study_file
+        from montecarlo.systems import study_from_dict
+
+        study = study_from_dict(merge_errors_file(read_study_file(args.study), args.errors),
+                                args.study, trials=args.trials, seed=args.seed,
+                                max_points=args.max_points)
+    else:
+        study = load_study(args.study, trials=args.trials, seed=args.seed,
+                           max_points=args.max_points)
     out = Path(args.out) if args.out else RESULTS_ROOT / study.header.name
     options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
                          chunk_size=args.chunk_size, progress=not quiet(args),
@@ -130,6 +138,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def add_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a study file and write results/<study>/")
     p.add_argument("study", help="study definition (TOML), e.g. studies/table1.toml")
+    p.add_argument("--errors", metavar="FILE.toml", help="update the study's [errors] table "
+                   "from this file (e.g. written by diagnose camera --emit-errors)")
     add_n_jobs_option(p)
     p.add_argument("--backend", choices=("loky", "dask"), default="loky",
                    help="loky: local processes; dask: a dask.distributed cluster")

@@ -364,6 +364,30 @@ def read_study_file(path: str | Path) -> dict[str, Any]:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
 
 
+def merge_errors_file(raw: dict[str, Any], path: str | Path) -> dict[str, Any]:
+    """The study ``raw`` with its ``[errors]`` table updated, key by key, from the TOML file at
+    ``path`` (e.g. the pixel error a camera calibration left, ``diagnose camera
+    --emit-errors``). The file may hold an ``[errors]`` table and nothing else.
+
+    Raises
+    ------
+    InputError
+        The file is missing or not TOML, or holds anything but an ``[errors]`` table.
+    """
+    extra = read_study_file(path)
+    if not isinstance(extra.get("errors"), dict) or set(extra) != {"errors"}:
+        other = sorted(set(extra) - {"errors"})
+        raise InputError(f"{path}: an errors file holds one [errors] table"
+                         + (f" and nothing else (got: {', '.join(other)})" if other else
+                            " (none found)"))
+    merged = copy.deepcopy(raw)
+    table = merged.setdefault("errors", {})
+    if not isinstance(table, dict):
+        raise InputError(f"{path}: errors: the study's errors is not a table")
+    table.update(copy.deepcopy(extra["errors"]))
+    return merged
+
+
 def load_study(path: str | Path, systems: Systems, *, trials: int | None = None,
                seed: int | None = None, max_points: int = MAX_POINTS) -> Study:
     """Read, validate and expand a study file; ``trials``/``seed`` override the file's."""
