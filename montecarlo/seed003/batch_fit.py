@@ -149,34 +149,75 @@ class BatchFit:
 
 
 class _Batch:
-    """The procedure's residual model with a leading trial axis on parameters and readings."""
+    """The procedure's residual model with a leading trial axis on parameters and readings.
+
+    The finite differences are grouped: the residuals of a measured mirror depend on its own
+    readings and roll and on those of the reference pointings only, so the columns of all
+    measured mirrors are perturbed in one evaluation (they touch disjoint residuals) and each
+    reference column in its own. Every residual is computed from the same numbers as when its
+    column is perturbed alone, so the differences equal the one-column-at-a-time ones.
+    """
 
     def __init__(self, data: BatchData, side: float, free_roll: bool, roll_sigma: float):
         self.model = pr._Model(data.trial(0), side, free_roll, roll_sigma)
         mdl = self.model
         self.z0 = np.concatenate([getattr(data, g)[:, mdl.rows] for g in mdl.groups], axis=-1)
         self.n_params = len(mdl.names)
+        position = {int(j): i for i, j in enumerate(mdl.k)}  # row -> measured mirror
+        self.z_own = [(f, position.get(int(j), -1)) for f in range(len(mdl.groups))
+                      for j in mdl.rows]
+        if data.center is None:
+            pointing = list(range(mdl.m)) + [-1, -1]  # the two reference pointings last
+        else:
+            pointing = [position.get(j, -1) for j in range(data.ins_az.shape[-1])]
+        self.x_own = [(0, -1)] * mdl.n_core + [(0, j if free_roll else -1) for j in
+                                               (pointing if free_roll else [-1] * mdl.n_prior)]
 
     def residuals(self, x: FloatArray, z: FloatArray) -> FloatArray:
         return self.model.residuals(x, z)
 
+    def _differences(self, own: list[tuple[int, int]], columns: NDArray[np.intp],
+                     evaluate: Callable[[FloatArray], FloatArray]) -> FloatArray:
+        """(T, 2m, len(columns)) central differences of the residuals over ``columns``.
+
+        ``own[c] = (family, mirror)``: column ``c`` moves the residuals of that measured mirror
+        alone (the columns of one family, e.g. the INS headings, are perturbed together), or
+        of all mirrors when ``mirror`` is -1. ``evaluate(steps)`` gives the residuals
+        (T, S, 2m) at the perturbations ``steps`` (S, n).
+        """
+        m = self.model.m
+        shared = [[j] for j, c in enumerate(columns) if own[c][1] < 0]
+        families: dict[int, list[int]] = {}
+        for j, c in enumerate(columns):
+            if own[c][1] >= 0:
+                families.setdefault(own[c][0], []).append(j)
+        colours = shared + list(families.values())
+        steps = np.zeros((2 * len(colours), len(own)))
+        for i, colour in enumerate(colours):
+            steps[i, columns[colour]] = pr._STEP
+            steps[len(colours) + i, columns[colour]] = -pr._STEP
+        r = evaluate(steps)
+        D = (r[:, :len(colours)] - r[:, len(colours):]) / (2 * pr._STEP)  # (T, colours, 2m)
+        out = np.zeros((r.shape[0], 2 * m, columns.size))
+        for i, colour in enumerate(colours):
+            if len(colour) == 1 and own[columns[colour[0]]][1] < 0:
+                out[:, :, colour[0]] = D[:, i]
+                continue
+            pos = np.array([own[columns[j]][1] for j in colour])
+            for half in (0, m):  # headings, then pitches
+                out[:, half + pos, colour] = D[:, i, half + pos]
+        return out
+
     def jacobian_x(self, x: FloatArray, z: FloatArray, free: NDArray[np.intp]) -> FloatArray:
         """(T, 2m, len(free)) central differences, as ``_Model.jacobian_x`` per trial."""
-        p = free.size
-        steps = np.zeros((2 * p, x.shape[-1]))
-        steps[np.arange(p), free] = pr._STEP
-        steps[p + np.arange(p), free] = -pr._STEP
-        r = self.residuals(x[:, None, :] + steps, z[:, None, :])
-        return np.swapaxes(r[:, :p] - r[:, p:], 1, 2) / (2 * pr._STEP)
+        return self._differences(self.x_own, free, lambda steps: self.residuals(
+            x[:, None, :] + steps, z[:, None, :]))
 
     def residual_covariance(self, x: FloatArray, z: FloatArray, sigma_ins: float,
                             sigma_theodolite: float) -> FloatArray:
         """(T, 2m, 2m), as ``_Model.residual_covariance`` per trial [rad^2]."""
-        q = z.shape[-1]
-        steps = pr._STEP * np.eye(q)
-        zz = z[:, None, :]
-        r = self.residuals(x[:, None, :], np.concatenate([zz + steps, zz - steps], axis=1))
-        G = np.swapaxes(r[:, :q] - r[:, q:], 1, 2) / (2 * pr._STEP)
+        G = self._differences(self.z_own, np.arange(z.shape[-1]), lambda steps: self.residuals(
+            x[:, None, :], z[:, None, :] + steps))
         s = np.where(self.model.is_ins, sigma_ins, sigma_theodolite)
         return (G * s**2) @ np.swapaxes(G, 1, 2)
 
