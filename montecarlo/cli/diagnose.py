@@ -5,6 +5,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,6 +39,44 @@ if TYPE_CHECKING:
     from montecarlo.discrepancy.view import SystemView
 
 
+SLOW_STEP = 2.0
+"""A step of a diagnosis taking at least this long [s] is named, with why, after the output."""
+
+
+class Steps:
+    """Wall time of the steps of one diagnosis, and the notes on the slow ones."""
+
+    def __init__(self) -> None:
+        self.spent: list[tuple[str, float, str]] = []
+
+    @contextmanager
+    def __call__(self, name: str, why: str = "") -> Iterator[None]:
+        t0 = time.perf_counter()
+        yield
+        self.spent.append((name, time.perf_counter() - t0, why))
+
+    def notes(self) -> list[str]:
+        """One line per step that took at least :data:`SLOW_STEP`: its time and why."""
+        return [f"slow step: {name} took {spent:.1f} s" + (f" ({why})" if why else "")
+                for name, spent, why in self.spent if spent >= SLOW_STEP]
+
+    def report(self, to_stderr: bool) -> None:
+        """Print the notes after the output: on stdout with the text, on stderr with --json."""
+        for line in self.notes():
+            print(line, file=sys.stderr if to_stderr else sys.stdout)
+
+
+LIBRARIES = "importing scipy, pandas and the model's modules; a few seconds on a cold or " \
+    "busy machine"
+"""Why loading can be slow."""
+
+
+def _fit_why(n_obs: int, n_params: int) -> str:
+    return (f"nonlinear fits of the base model, of every candidate and of the adapted model to "
+            f"{n_obs} residuals; each Jacobian evaluates the model {2 * n_params}+ times "
+            "(central differences)")
+
+
 def _unit(unit: str) -> str:
     return "" if unit == "1" else f" {unit}"
 
@@ -54,7 +96,7 @@ def _check_files(args: argparse.Namespace) -> None:
 
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
-                      source: str) -> int:
+                      source: str, steps: Steps) -> int:
     from montecarlo.discrepancy.view import format_text, to_json
     from montecarlo.output.provenance import provenance
 
@@ -65,25 +107,32 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
         from montecarlo.systems.discrepancy import monte_carlo_gap
 
         with OutputDir(args.report, "diagnose") as staging:
-            mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
-                if args.trials > 0 else None
-            write_report(staging, d, view, report, mc, args.trials, args.seed)
+            with steps("the report's Monte Carlo", f"{args.trials} simulated data sets per "
+                       "model, each fitted; --trials sets how many"):
+                mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
+                    if args.trials > 0 else None
+            with steps("the report's plots", "matplotlib"):
+                write_report(staging, d, view, report, mc, args.trials, args.seed)
             write_provenance(staging, "diagnose", **record)
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
+        steps.report(to_stderr=True)
         return 0
     print(format_text(report))
     if args.report:
         print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
               "gap.png)")
+    steps.report(to_stderr=False)
     return 0
 
 
 def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import ground_effects as ge
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.geometry.camera import Camera
-    from montecarlo.io.ground_csv import read_ground_csv
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import ground_effects as ge
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.ground_csv import read_ground_csv
 
     _check_outputs(args)
     try:
@@ -97,52 +146,64 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     ge.check_in_front(data, camera, str(args.data))
     sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
-        d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
-                     args.alpha)
+        with steps("the diagnosis", _fit_why(2 * len(data.pixels), 6)):
+            d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
+                         args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
-                                                     args.refraction_k), str(args.data))
+                                                     args.refraction_k), str(args.data), steps)
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import collimation_effects as ce
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.io.collimation_csv import read_mirror_csv
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import collimation_effects as ce
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.io.collimation_csv import read_mirror_csv
 
     _check_outputs(args)
     sigma = args.angle_sigma_arcsec * ARCSEC
     if args.readings == "reference":
-        return _diagnose_procedure(args, sigma)
+        return _diagnose_procedure(args, sigma, steps)
     if args.roll_mirror is not None:
         raise InputError("--roll-mirror: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
     try:
-        d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
+        with steps("the diagnosis", _fit_why(2 * len(data.sets), 4)):
+            d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps)
 
 
 def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import stabilization_effects as ste
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.discrepancy.view import format_text, to_json
-    from montecarlo.geometry.camera import Camera
-    from montecarlo.io.stabilization_csv import read_csv
-    from montecarlo.output.provenance import provenance
-    from montecarlo.units import DEG_PER_ROOT_HOUR
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import stabilization_effects as ste
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.discrepancy.view import format_text, to_json
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.stabilization_csv import read_csv
+        from montecarlo.output.provenance import provenance
+        from montecarlo.units import DEG_PER_ROOT_HOUR
 
     check_json_option(args)
-    record = read_csv(args.data)
+    with steps("reading the recording", "a CSV row per sample"):
+        record = read_csv(args.data)
     camera = Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
     gyro_noise = args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR
+    n = len(record.t)
     try:
-        d = diagnose(ste.stabilization_problem(record, camera, args.image_noise_px, gyro_noise,
-                                               args.mount, args.gyro_sampling), args.alpha)
+        with steps("the estimator's start", f"recursive least squares over the {n} samples, "
+                   "then the image walk's Kalman whitening"):
+            problem = ste.stabilization_problem(record, camera, args.image_noise_px,
+                                                gyro_noise, args.mount, args.gyro_sampling)
+        with steps("the diagnosis", _fit_why(2 * n, len(problem.base.parameters))):
+            d = diagnose(problem, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
@@ -151,12 +212,14 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
                    "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
                    "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
+        steps.report(to_stderr=True)
         return 0
     print(format_text(report))
+    steps.report(to_stderr=False)
     return 0
 
 
-def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
+def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) -> int:
     """``diagnose collimation --readings reference``: the procedure's reading model as base."""
     from montecarlo.discrepancy import procedure_effects as pe
     from montecarlo.discrepancy.engine import diagnose
@@ -173,10 +236,12 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
         raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
                          f"{pe.min_mirrors()} needed")
     try:
-        d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
+        with steps("the diagnosis", _fit_why(2 * measured, 4)):
+            d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data))
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data),
+                             steps)
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:

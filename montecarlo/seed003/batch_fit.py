@@ -167,7 +167,7 @@ class _Batch:
         self.z_own = [(f, position.get(int(j), -1)) for f in range(len(mdl.groups))
                       for j in mdl.rows]
         if data.center is None:
-            pointing = list(range(mdl.m)) + [-1, -1]  # the two reference pointings last
+            pointing = [*range(mdl.m), -1, -1]  # the two reference pointings last
         else:
             pointing = [position.get(j, -1) for j in range(data.ins_az.shape[-1])]
         self.x_own = [(0, -1)] * mdl.n_core + [(0, j if free_roll else -1) for j in
@@ -238,7 +238,7 @@ def _levenberg_marquardt(fun: Callable[[FloatArray, NDArray[np.intp]], FloatArra
     J = jac(x, everyone)
     mu = np.full(x.shape[0], 1e-3)
     active = np.ones(x.shape[0], bool)
-    for it in range(MAX_ITERATIONS):
+    for _ in range(MAX_ITERATIONS):
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break

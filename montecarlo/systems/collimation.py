@@ -223,7 +223,7 @@ def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generat
 def _procedure_block(p: Mapping[str, float | int | str], rng: np.random.Generator, n: int,
                      az: FloatArray, el: FloatArray, noise: Noise, side: float, free: bool,
                      truth: tuple[float, float]) -> dict[str, FloatArray]:
-    """:func:`_procedure_trials` for the whole block at once (:mod:`montecarlo.seed003.batch_fit`)."""
+    """:func:`_procedure_trials` for a whole block at once (:mod:`montecarlo.seed003.batch_fit`)."""
     from montecarlo.seed003 import batch_fit as bf
     from montecarlo.seed003.procedure import NotDetermined
 
