@@ -14,6 +14,9 @@ trial axis on every array:
 * only the nonlinear solve differs: a batched Levenberg-Marquardt iteration (Marquardt's
   diagonal scaling, each trial with its own damping, each stopped when its step is below
   :data:`STEP_TOL`) in place of MINPACK's, which the literal path runs one trial at a time.
+  Where the data do not determine every parameter the two may end in different places of the
+  valley, so a trial the batch finds not separable, or whose solution wandered beyond
+  :data:`FAR`, is fitted again by the literal path.
 
 The two minimise the same cost from the same start, so they agree to the rounding of the
 converged solution (tests/test_collimation_batch.py states and checks the tolerance). The literal
@@ -61,6 +64,14 @@ MAX_DAMPING = 1e12
 
 MAX_ITERATIONS = 200
 """Iterations after which a batch stops, converged or not (never reached in the tests)."""
+
+FAR = 1.0
+"""A batched solution with a parameter or a core parameter's sigma beyond this [rad] has wandered
+off along a direction the data hardly determine (the offsets and rolls are degrees at most);
+that trial, like one the batch finds not separable, is fitted again by the literal path, whose
+verdict it keeps. Where the layout does not determine the offsets (no pitch mirror with
+fitted rolls, say) the literal fit itself may wander, and the two paths can then give
+different numbers, both meaningless: their sigmas say so."""
 
 
 @dataclass(frozen=True)
@@ -384,10 +395,25 @@ def fit_block(data: BatchData, *, sigma_ins: float, sigma_theodolite: float, sid
         rolls = np.concatenate([data.ins_roll[:, mdl.rows], x[:, mdl.n_core:]], axis=-1)
     else:
         rolls = np.zeros((T, mdl.rows.size + (0 if data.center is not None else 2)))
+    x, cov, res, rolls = x.copy(), cov.copy(), res.copy(), rolls.copy()
+    chi2 = np.einsum("ti,ti->t", w, w)
+    # A trial that failed, or whose solution or core sigma is beyond FAR (the offsets and
+    # rolls are degrees at most), is fitted again by the literal path, which decides it.
+    core_sigma = np.sqrt(np.abs(np.diagonal(cov, axis1=1, axis2=2)[:, :mdl.n_core]))
+    far = ~(np.abs(x) <= FAR).all(axis=-1) | ~(core_sigma <= FAR).all(axis=-1)
+    for i in np.flatnonzero(~ok | far):
+        try:
+            f = pr.fit_procedure(data.trial(i), side=side, free_roll=free_roll,
+                                 roll_sigma=roll_sigma, sigma_ins=sigma_ins,
+                                 sigma_theodolite=sigma_theodolite, before=False)
+        except pr.NotDetermined:
+            ok[i] = False
+            continue
+        ok[i] = True
+        x[i], cov[i], chi2[i], rolls[i] = f.values, f.covariance, f.chi2, f.rolls
+        res[i] = np.concatenate([f.residuals[:, 0], f.residuals[:, 1]])
     bad = ~ok
-    x, cov, res = x.copy(), cov.copy(), res.copy()
-    x[bad], cov[bad], res[bad] = np.nan, np.nan, np.nan
-    chi2 = np.where(ok, np.einsum("ti,ti->t", w, w), np.nan)
+    x[bad], cov[bad], res[bad], chi2[bad] = np.nan, np.nan, np.nan, np.nan
     return BatchFit(mdl.names, x, cov, chi2, dof, res, rolls, ok, mdl.recorded_roll)
 
 
