@@ -146,3 +146,17 @@ def test_batched_study_is_identical_on_two_workers():
     base = run_study(study, RunOptions(n_jobs=1, progress=False)).to_frame()
     two = run_study(study, RunOptions(n_jobs=2, chunk_size=32, progress=False)).to_frame()
     assert base.equals(two)
+
+
+def test_a_batch_stopped_by_a_matrix_goes_trial_by_trial(monkeypatch):
+    """If one trial's matrix stops the batch, every trial is fitted by the literal path (on the
+    batch's readings, equal to the loop's to rounding): the literal numbers, within tolerance."""
+    calls = []
+
+    def stop(*args, **kwargs):
+        calls.append(1)
+        raise np.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(bf, "_fit_from_starts", stop)
+    _compare({**BASE, "use_roll": 1}, 3, seed=3)
+    assert calls

@@ -384,7 +384,12 @@ def fit_block(data: BatchData, *, sigma_ins: float, sigma_theodolite: float, sid
     if dof < 1:
         raise pr.NotDetermined(f"{mdl.m} measured mirrors give {2 * mdl.m} readings; "
                                f"{mdl.n_core} parameters need more measured mirrors")
-    x, cov, w, ok = _fit_from_starts(b, float(sigma_ins), float(sigma_theodolite))
+    try:
+        x, cov, w, ok = _fit_from_starts(b, float(sigma_ins), float(sigma_theodolite))
+    except np.linalg.LinAlgError:  # one trial's matrix stopped the batch: all go one by one
+        T, n_res = data.trials, 2 * mdl.m + mdl.n_prior
+        x, cov = np.zeros((T, p)), np.full((T, p, p), np.nan)
+        w, ok = np.zeros((T, n_res)), np.zeros(T, bool)
     res = b.residuals(x, b.z0)
     T = data.trials
     if free_roll:
