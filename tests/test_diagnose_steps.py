@@ -5,12 +5,12 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from montecarlo.cli import diagnose
+from montecarlo.cli import steps as timing
 
 
 def test_a_slow_step_is_named_with_why(monkeypatch):
-    monkeypatch.setattr(diagnose, "SLOW_STEP", 0.0)
-    steps = diagnose.Steps()
+    monkeypatch.setattr(timing, "SLOW_STEP", 0.0)
+    steps = timing.Steps()
     with steps("the diagnosis", "nonlinear fits"):
         pass
     with steps("loading"):
@@ -23,8 +23,8 @@ def test_a_slow_step_is_named_with_why(monkeypatch):
 
 
 def test_a_quick_step_is_not_named(monkeypatch):
-    monkeypatch.setattr(diagnose, "SLOW_STEP", float("inf"))
-    steps = diagnose.Steps()
+    monkeypatch.setattr(timing, "SLOW_STEP", float("inf"))
+    steps = timing.Steps()
     with steps("loading", "imports"):
         pass
     assert steps.notes() == []
@@ -36,7 +36,7 @@ def test_json_output_stays_parsable_with_notes(tmp_path):
     import json
 
     data = "results/examples/discrepancy_collimation/data.csv"
-    code = ("import sys; from montecarlo.cli import diagnose; diagnose.SLOW_STEP = 0.0; "
+    code = ("import sys; from montecarlo.cli import steps; steps.SLOW_STEP = 0.0; "
             "from montecarlo.cli import main; sys.exit(main(sys.argv[1:]))")
     out = subprocess.run([sys.executable, "-c", code, "diagnose", "collimation", data,
                           "--readings", "absolute", "--angle-sigma-arcsec", "2.828", "--json"],

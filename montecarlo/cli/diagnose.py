@@ -5,10 +5,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,6 +26,7 @@ from montecarlo.cli.common import (
     write_provenance,
     write_text,
 )
+from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
@@ -37,44 +34,6 @@ from montecarlo.units import ARCSEC
 if TYPE_CHECKING:
     from montecarlo.discrepancy.engine import Diagnosis
     from montecarlo.discrepancy.view import SystemView
-
-
-SLOW_STEP = 2.0
-"""A step of a diagnosis taking at least this long [s] is named, with why, after the output."""
-
-
-class Steps:
-    """Wall time of the steps of one diagnosis, and the notes on the slow ones."""
-
-    def __init__(self) -> None:
-        self.spent: list[tuple[str, float, str]] = []
-
-    @contextmanager
-    def __call__(self, name: str, why: str = "") -> Iterator[None]:
-        t0 = time.perf_counter()
-        yield
-        self.spent.append((name, time.perf_counter() - t0, why))
-
-    def notes(self) -> list[str]:
-        """One line per step that took at least :data:`SLOW_STEP`: its time and why."""
-        return [f"slow step: {name} took {spent:.1f} s" + (f" ({why})" if why else "")
-                for name, spent, why in self.spent if spent >= SLOW_STEP]
-
-    def report(self, to_stderr: bool) -> None:
-        """Print the notes after the output: on stdout with the text, on stderr with --json."""
-        for line in self.notes():
-            print(line, file=sys.stderr if to_stderr else sys.stdout)
-
-
-LIBRARIES = "importing scipy, pandas and the model's modules; a few seconds on a cold or " \
-    "busy machine"
-"""Why loading can be slow."""
-
-
-def _fit_why(n_obs: int, n_params: int) -> str:
-    return (f"nonlinear fits of the base model, of every candidate and of the adapted model to "
-            f"{n_obs} residuals; each Jacobian evaluates the model {2 * n_params}+ times "
-            "(central differences)")
 
 
 def _unit(unit: str) -> str:
@@ -146,7 +105,7 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     ge.check_in_front(data, camera, str(args.data))
     sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
-        with steps("the diagnosis", _fit_why(2 * len(data.pixels), 6)):
+        with steps("the diagnosis", fit_why(2 * len(data.pixels), 6)):
             d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
                          args.alpha)
     except FitError as exc:
@@ -172,7 +131,7 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
     try:
-        with steps("the diagnosis", _fit_why(2 * len(data.sets), 4)):
+        with steps("the diagnosis", fit_why(2 * len(data.sets), 4)):
             d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
@@ -202,7 +161,7 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
                    "then the image walk's Kalman whitening"):
             problem = ste.stabilization_problem(record, camera, args.image_noise_px,
                                                 gyro_noise, args.mount, args.gyro_sampling)
-        with steps("the diagnosis", _fit_why(2 * n, len(problem.base.parameters))):
+        with steps("the diagnosis", fit_why(2 * n, len(problem.base.parameters))):
             d = diagnose(problem, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
@@ -236,7 +195,7 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
         raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
                          f"{pe.min_mirrors()} needed")
     try:
-        with steps("the diagnosis", _fit_why(2 * measured, 4)):
+        with steps("the diagnosis", fit_why(2 * measured, 4)):
             d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
