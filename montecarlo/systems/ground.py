@@ -306,8 +306,10 @@ class GroundSystem:
                          clock: dict[str, float] | None = None) -> None:
         """The same trials through the fused kernel, aggregated straight into ``stats``.
 
-        ``clock``, if given, receives the seconds spent in each stage (``draws``, ``solve``,
-        ``metrics``, ``accumulation``; added to what it holds), for the benchmark's roofline.
+        ``clock``, if given, receives the CPU seconds of the calling thread spent in each stage
+        (``draws``, ``solve``, ``metrics``, ``accumulation``; added to what it holds), for the
+        benchmark's roofline. The kernels run in the calling thread, and its CPU time leaves
+        out the time other processes take from it on a busy machine.
         """
         from montecarlo.engine import accumulate  # numba: loaded only where kernels run
         from montecarlo.seed000 import ground_kernel as gk
@@ -318,7 +320,7 @@ class GroundSystem:
         cam = p.camera
         acc = accumulate.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
-        tick = time.perf_counter if clock is not None else None
+        tick = time.thread_time if clock is not None else None
         for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
             t0 = tick() if tick else 0.0
             m = min(gk.SUB_CHUNK, n - s)

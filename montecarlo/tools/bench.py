@@ -115,7 +115,9 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
     the generator alone filling as many U[0, 1) numbers into a reused buffer, the metrics
     against the same ufuncs alone on contiguous copies of the same arguments, the solve and
     the accumulation against a memory copy of as many bytes as they read and write. Times
-    are medians of ``repeats`` runs [ns per trial]; ``fraction`` is ceiling / stage.
+    are CPU times of this thread (so that other processes' load does not enter; the kernels
+    run in this thread), medians of ``repeats`` runs [ns per trial]; ``fraction`` is
+    ceiling / stage.
     """
     from montecarlo.seed000 import ground_kernel as gk
     from montecarlo.systems.ground import STAGES, _scratch
@@ -174,9 +176,9 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
             np.copyto(dst, src)
 
     def timed(fn) -> float:
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         fn()
-        return time.perf_counter() - t0
+        return time.thread_time() - t0
 
     stages()  # warm-up: compilation, caches
     spent: dict[str, list[float]] = {k: [] for k in (*STAGES, "total")}
@@ -209,8 +211,8 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
 def format_roofline(r: dict[str, Any]) -> list[str]:
     """The roofline table of :func:`ground_roofline`."""
     total = r["total_ns_per_trial"]
-    lines = [f"roofline of the fused ground path, one core ({r['trials']:,} trials in "
-             f"sub-chunks of {r['sub_chunk']:,}); fraction = ceiling / stage:",
+    lines = [f"roofline of the fused ground path, one core, CPU time ({r['trials']:,} trials "
+             f"in sub-chunks of {r['sub_chunk']:,}); fraction = ceiling / stage:",
              f"  {'stage':<13}{'ns/trial':>9}{'share':>7}  {'ceiling ns/trial':>16}"
              f"{'fraction':>9}  ceiling"]
     for s in r["stages"]:
