@@ -27,6 +27,7 @@ from montecarlo.cli.common import (
     write_provenance,
     write_text,
 )
+from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
@@ -56,7 +57,7 @@ def _check_files(args: argparse.Namespace) -> None:
 
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
-                      source: str) -> int:
+                      source: str, steps: Steps) -> int:
     from montecarlo.discrepancy.view import format_text, to_json
     from montecarlo.output.provenance import provenance
 
@@ -67,25 +68,32 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
         from montecarlo.systems.discrepancy import monte_carlo_gap
 
         with OutputDir(args.report, "diagnose", inputs=(Path(source),)) as staging:
-            mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
-                if args.trials > 0 else None
-            write_report(staging, d, view, report, mc, args.trials, args.seed)
+            with steps("the report's Monte Carlo", f"{args.trials} simulated data sets per "
+                       "model, each fitted; --trials sets how many"):
+                mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
+                    if args.trials > 0 else None
+            with steps("the report's plots", "matplotlib"):
+                write_report(staging, d, view, report, mc, args.trials, args.seed)
             write_provenance(staging, "diagnose", **record)
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
+        steps.report(to_stderr=True)
         return 0
     print(format_text(report))
     if args.report:
         print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
               "gap.png)")
+    steps.report(to_stderr=False)
     return 0
 
 
 def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import ground_effects as ge
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.geometry.camera import Camera
-    from montecarlo.io.ground_csv import read_ground_csv
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import ground_effects as ge
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.ground_csv import read_ground_csv
 
     _check_outputs(args)
     try:
@@ -99,34 +107,38 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     ge.check_in_front(data, camera, str(args.data))
     sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
-        d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
-                     args.alpha)
+        with steps("the diagnosis", fit_why(2 * len(data.pixels), 6)):
+            d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
+                         args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
-                                                     args.refraction_k), str(args.data))
+                                                     args.refraction_k), str(args.data), steps)
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import collimation_effects as ce
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.io.collimation_csv import read_mirror_csv
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import collimation_effects as ce
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.io.collimation_csv import read_mirror_csv
 
     _check_outputs(args)
     sigma = args.angle_sigma_arcsec * ARCSEC
     if args.readings == "reference":
-        return _diagnose_procedure(args, sigma)
+        return _diagnose_procedure(args, sigma, steps)
     if args.roll_mirror is not None:
         raise InputError("--roll-mirror: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
     _check_separable(args.data, data)
     try:
-        d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
+        with steps("the diagnosis", fit_why(2 * len(data.sets), 4)):
+            d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps)
 
 
 def _check_separable(path: str, data: MirrorData) -> None:
@@ -143,22 +155,30 @@ def _check_separable(path: str, data: MirrorData) -> None:
 
 
 def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import stabilization_effects as ste
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.discrepancy.view import format_text, to_json
-    from montecarlo.geometry.camera import Camera
-    from montecarlo.io.stabilization_csv import read_csv
-    from montecarlo.output.provenance import provenance
-    from montecarlo.units import DEG_PER_ROOT_HOUR
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import stabilization_effects as ste
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.discrepancy.view import format_text, to_json
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.stabilization_csv import read_csv
+        from montecarlo.output.provenance import provenance
+        from montecarlo.units import DEG_PER_ROOT_HOUR
 
     check_json_option(args)
-    record = read_csv(args.data)
+    with steps("reading the recording", "a CSV row per sample"):
+        record = read_csv(args.data)
     camera = Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
     gyro_noise = args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR
+    n = len(record.t)
     try:
-        d = diagnose(ste.stabilization_problem(record, camera, args.image_noise_px, gyro_noise,
-                                               args.mount, args.gyro_sampling), args.alpha)
+        with steps("the estimator's start", f"recursive least squares over the {n} samples, "
+                   "then the image walk's Kalman whitening"):
+            problem = ste.stabilization_problem(record, camera, args.image_noise_px,
+                                                gyro_noise, args.mount, args.gyro_sampling)
+        with steps("the diagnosis", fit_why(2 * n, len(problem.base.parameters))):
+            d = diagnose(problem, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
@@ -167,99 +187,20 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
                    "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
                    "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
+        steps.report(to_stderr=True)
         return 0
     print(format_text(report))
+    steps.report(to_stderr=False)
     return 0
-
-
-RMS_CONVENTION = ("rms is per image coordinate (u and v pooled); the rms of the 2-D residual "
-                  "of a point is sqrt(2) times larger")
-
-
-def camera_summary(d: Diagnosis) -> dict[str, dict[str, float]]:
-    """The final model's camera in Zhang's terms: alpha = f, beta = f (1 + a), gamma, u0, v0
-    [px] and the distortion terms, each with its standard error."""
-    p, cov, names = d.after.params, d.after.covariance, d.after.names
-    se = d.after.stderr
-    out = {"alpha": {"value": p["f"], "stderr": se["f"], "unit": "px"}}
-    a = p.get("a", 0.0)
-    grad = np.zeros(len(names))
-    grad[names.index("f")] = 1.0 + a
-    if "a" in names:
-        grad[names.index("a")] = p["f"]
-    out["beta"] = {"value": p["f"] * (1.0 + a), "stderr": float(np.sqrt(grad @ cov @ grad)),
-                   "unit": "px"}
-    for key, name, unit in (("gamma", "gamma", "px"), ("u0", "cx", "px"), ("v0", "cy", "px"),
-                            ("k1", "k1", "1"), ("k2", "k2", "1"), ("k3", "k3", "1"),
-                            ("p1", "p1", "1"), ("p2", "p2", "1")):
-        out[key] = {"value": p.get(name, 0.0), "stderr": se.get(name, 0.0), "unit": unit}
-    return out
 
 
 def _cmd_diagnose_camera(args: argparse.Namespace) -> int:
-    from montecarlo.camera_calibration.calibrate import CalibrationError
-    from montecarlo.discrepancy import camera_effects as cam
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.discrepancy.significance import format_significance, practical_significance
-    from montecarlo.discrepancy.view import format_text, to_json
-    from montecarlo.io.camera_csv import read_camera_csv
-    from montecarlo.io.files import atomic_write_bytes
-    from montecarlo.output.provenance import provenance
+    from montecarlo.cli.camera import diagnose_camera
 
-    _check_outputs(args)
-    if args.emit_errors:
-        writable_file(args.emit_errors)
-    data = read_camera_csv(args.model, args.views)
-    source = f"{args.model}, {args.views}"
-    sigma = args.pixel_sigma_px
-    try:
-        d = diagnose(cam.camera_problem(data, sigma), args.alpha)
-    except (FitError, CalibrationError) as exc:
-        raise InputError(f"{args.views}: {exc}") from None
-    view = cam.report_view(data, sigma)
-    report = to_json(d, view, source)
-    significance = practical_significance(d, view, cam.INTRINSIC_REPORTED)
-    error = cam.pixel_error(d, data, sigma)
-    report.update({"rms_convention": RMS_CONVENTION, "camera": camera_summary(d),
-                   "practical_significance": significance, "pixel_error": error})
-    camera = report["camera"]
-    lines = [format_text(report), "", RMS_CONVENTION,
-             "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
-                 f"{k} = {v['value']:.6g} ± {v['stderr']:.2g}{_unit(v['unit'])}"
-                 for k, v in camera.items() if v["stderr"] > 0),
-             format_significance(significance),
-             f"pixel error left: sigma u {error['sigma_u']:.4f} px, v {error['sigma_v']:.4f} px;"
-             f" remaining distortion up to {error['distortion_bound']:.4f} px "
-             f"({error['distortion_source'] or 'none tested'}, at its MDB)"]
-    text = "\n".join(lines)
-    record = {"model": str(args.model), "views": str(args.views), "alpha": args.alpha,
-              "pixel_sigma_px": sigma}
-    if args.report:
-        from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
-
-        with OutputDir(args.report, "diagnose") as staging:
-            write_report(staging, d, view, report)
-            atomic_write_bytes(Path(staging) / "report.md", "\n".join(
-                ["# Diagnosis", "", "```", text, "```", "", "![residuals](residuals.png)", "",
-                 "![gap](gap.png)", ""]).encode())
-            write_provenance(staging, "diagnose", **record)
-    if args.emit_errors:
-        toml = cam.errors_toml(error, source, sigma, d.after.effects)
-        atomic_write_bytes(Path(args.emit_errors), toml.encode())
-    if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
-        return 0
-    print(text)
-    if args.report:
-        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
-              "gap.png)")
-    if args.emit_errors:
-        print(f"pixel error for a ground study written to {args.emit_errors} "
-              "(use: montecarlo size|run ... --errors FILE)")
-    return 0
+    return diagnose_camera(args)
 
 
-def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
+def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) -> int:
     """``diagnose collimation --readings reference``: the procedure's reading model as base."""
     from montecarlo.discrepancy import procedure_effects as pe
     from montecarlo.discrepancy.engine import diagnose
@@ -276,10 +217,12 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
         raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
                          f"{pe.min_mirrors()} needed")
     try:
-        d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
+        with steps("the diagnosis", fit_why(2 * measured, 4)):
+            d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data))
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data),
+                             steps)
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:

@@ -129,7 +129,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from montecarlo.tools.bench import format_bench, run_bench
 
     check_json_option(args)
-    result = run_bench(quick=args.quick, repeats=args.repeats)
+    result = run_bench(quick=not args.full, repeats=args.repeats)
     if not emit_json(args, result):
         print(format_bench(result))
     return 0
@@ -192,6 +192,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("bench", help="trials per second of the reference and fast ground paths")
     add_json_option(p, "every figure")
-    p.add_argument("--quick", action="store_true", help="small sizes (seconds, for tests)")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--quick", action="store_true", help="small sizes, under 30 s on two "
+                      "quiet cores (the default; what `make bench` runs)")
+    size.add_argument("--full", action="store_true", help="the full sizes: runner scaling up "
+                      "to 10^8 trials, memory at 10^8, cold-cache compile time (minutes)")
     p.add_argument("--repeats", type=positive_int, default=5, help="timed runs per figure (5)")
     p.set_defaults(func=_cmd_bench)
