@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -173,7 +174,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     study = load_study(args.study)
     h, spec = study.header, study.spec
     stat = spec.statistic if spec else "p95"
-    p = planning.PERCENTILES.get(stat, args.coverage)
+    # a superquantile's tail starts at its level's quantile: the counts below are for that
+    p = planning.PERCENTILES.get(stat) or planning.cvar_level(stat) or args.coverage
     c = h.confidence
     if not 0.0 < args.level_width < min(p, 1.0 - p):
         raise InputError(f"--level-width: must be below {min(p, 1.0 - p):g} for the "
@@ -197,6 +199,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         f"k={k}: n={n:,}" for k, n in free.itertuples(index=False)))
     print(f"  the {c:.0%} interval of the {p:g}-quantile spans at most ±{args.level_width:g} "
           f"in quantile level from {level_n:,} trials")
+    if planning.cvar_level(stat):
+        print(f"  {stat} (mean of the worst {1 - p:.0%}): its interval is asymptotically "
+              f"normal, not distribution-free; within 2 points of its coverage from "
+              f"{math.ceil(250 / (1 - p)):,} trials (250 in the tail)")
     print(f"from a pilot of {pilot_trials:,} trials per grid point (estimates: the interval "
           "half-width shrinks as 1/sqrt(n); `run --until-decided` checks):")
     print(table.to_string(index=False))

@@ -10,7 +10,9 @@ an upper bound of the p-quantile with confidence c when ``P(B >= k) >= c``, B ~ 
 In metric units the width depends on the distribution, so a pilot run measures it: an
 interval's half-width shrinks as 1 / sqrt(n), so ``n = n0 (h0 / h)^2`` trials give half-width h,
 and a verdict is decided once the half-width is below the distance from the statistic to the
-limit. These are estimates from the pilot, not guarantees; ``run --until-decided`` checks.
+limit. The same holds for a superquantile (``cvarNN``), whose interval is asymptotically normal
+(:mod:`montecarlo.engine.superquantile`). These are estimates from the pilot, not guarantees;
+``run --until-decided`` checks.
 """
 
 from __future__ import annotations
@@ -23,8 +25,14 @@ from scipy.special import bdtr
 
 from montecarlo.engine.aggregate import order_statistic_ranks
 from montecarlo.engine.runner import StudyResult
+from montecarlo.engine.superquantile import cvar_level
 
 PERCENTILES = {"p50": 0.50, "p90": 0.90, "p95": 0.95, "p99": 0.99}
+
+
+def has_interval(statistic: str) -> bool:
+    """True for the statistics with a confidence interval: percentiles and ``cvarNN``."""
+    return statistic in PERCENTILES or cvar_level(statistic) is not None
 
 
 def order_statistic_trials(k: int, p: float, confidence: float) -> int:
@@ -80,7 +88,7 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     study = result.study
     spec = study.spec
     metric = spec.metric if spec else study.metrics[0][1].name
-    stat = spec.statistic if spec and spec.statistic in PERCENTILES else "p95"
+    stat = spec.statistic if spec and has_interval(spec.statistic) else "p95"
     rows = summary[summary["metric"] == metric]
     if spec and spec.variant:
         rows = rows[rows["variant"] == spec.variant]
@@ -91,7 +99,7 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     half = np.maximum(value - lo, hi - value)
     out[stat], out[f"{stat}_lo"], out[f"{stat}_hi"] = value, lo, hi
     sampled = (rows["sampling"] != "enumerated").to_numpy()
-    if spec is not None and spec.statistic in PERCENTILES:
+    if spec is not None and has_interval(spec.statistic):
         distance = np.abs(value - spec.limit)
         with np.errstate(divide="ignore", invalid="ignore"):
             need = np.where(distance > 0, np.ceil(n0 * (half / distance) ** 2), np.inf)

@@ -40,6 +40,7 @@ from montecarlo.engine.aggregate import (
 )
 from montecarlo.engine.checkpoints import Checkpoints
 from montecarlo.engine.study import Study
+from montecarlo.engine.superquantile import is_cvar_column
 from montecarlo.engine.tasks import PointTask, exit_with_parent, run_task
 from montecarlo.errors import InputError, RunInterrupted
 
@@ -88,7 +89,8 @@ class StudyResult:
         for gp, pr in zip(self.study.points, self.points, strict=True):
             df = pr.summary.copy()
             scale = df["metric"].map({m.name: m.scale for _, m in self.study.metrics})
-            values = [c for c in (*VALUE_COLUMNS, *SPEC_COLUMNS) if c in df.columns]
+            values = [c for c in df.columns
+                      if c in VALUE_COLUMNS or c in SPEC_COLUMNS or is_cvar_column(c)]
             df[values] = df[values].mul(scale, axis=0)
             df.insert(0, "point", gp.index)
             for i, key in enumerate(self.study.sweep_keys):

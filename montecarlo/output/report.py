@@ -47,7 +47,7 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
     out = sel[["point", *study.sweep_keys, "variant", "trials", "invalid_fraction"]].copy()
     out[f"{stat} (valid trials)"] = sel[stat]
     out[f"{stat} (all trials)"] = sel["spec_value"]
-    if stat.startswith("p"):
+    if stat.startswith(("p", "cvar")):
         out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" if sampling == "random" else "exact"
                              for a, b, sampling in zip(sel["spec_lo"], sel["spec_hi"],
                                                        sel["sampling"], strict=True)]
