@@ -19,6 +19,8 @@ import pandas as pd
 
 from montecarlo.engine.runner import RunOptions, StudyResult
 from montecarlo.io.files import PROVENANCE, atomic_write_bytes
+from montecarlo.output.captions import figure_caption
+from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
@@ -28,7 +30,7 @@ from montecarlo.output.saved import HISTOGRAMS, histogram_table, load_result
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
                   fmt: str = "png") -> Path:
     """Write summary.csv/.parquet, histograms.parquet, trials.parquet (if kept),
-    provenance.json, plots (in ``fmt``) and report.md."""
+    provenance.json, plots (in ``fmt``), report.md and report.html."""
     out_dir = Path(out_dir)
     summary = result.to_frame()
     summary.to_csv(out_dir / "summary.csv", index=False)
@@ -42,23 +44,29 @@ def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
     prov = study_provenance(result, options_record)
     (out_dir / PROVENANCE).write_text(json.dumps(prov, indent=2, default=str))
     (out_dir / "plots").mkdir()
-    names = _draw(result, summary, out_dir / "plots", fmt)
-    (out_dir / "report.md").write_text(render_report(result, summary, prov, names))
+    names, figures = _draw(result, summary, out_dir / "plots", fmt)
+    md = render_report(result, summary, prov, names)
+    (out_dir / "report.md").write_text(md)
+    write_html(out_dir, figures, f"Study {result.study.header.name}", md)
     return out_dir
 
 
-def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str) -> list[str]:
-    """Save every figure into ``plots`` as ``fmt``; returns the file names."""
-    names = []
+def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str
+          ) -> tuple[list[str], dict[str, HtmlFigure]]:
+    """Save every figure into ``plots`` as ``fmt``; returns the file names and the figures
+    for report.html (inline SVG with captions), by file name."""
+    names, figures = [], {}
     for name, fig in all_figures(result, summary):
         name = f"{Path(name).stem}.{fmt}"
         fig.savefig(plots / name, dpi=110)
         names.append(name)
-    return names
+        figures[name] = HtmlFigure(figure_svg(fig), figure_caption(result, name))
+    return names, figures
 
 
 def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, Any]]:
-    """Draw the plots and write report.md of a result directory again from its saved data.
+    """Draw the plots and write report.md and report.html of a result directory again from its
+    saved data.
 
     The new plots are drawn into a temporary directory beside ``plots/`` and swapped in only
     when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes.
@@ -69,9 +77,10 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
         shutil.rmtree(stale, ignore_errors=True)
     staging = Path(tempfile.mkdtemp(prefix=".plots.tmp-", dir=path))
     try:
-        names = _draw(result, summary, staging, fmt)
-        atomic_write_bytes(path / "report.md",
-                           render_report(result, summary, prov, names).encode())
+        names, figures = _draw(result, summary, staging, fmt)
+        md = render_report(result, summary, prov, names)
+        atomic_write_bytes(path / "report.md", md.encode())
+        write_html(path, figures, f"Study {result.study.header.name}", md)
         old = path / "plots"
         if old.exists():
             retired = Path(tempfile.mkdtemp(prefix=".plots.old-", dir=path))
