@@ -89,8 +89,10 @@ def _cmd_size(args: argparse.Namespace) -> int:
                          base_study=args.study, requirement=vars(problem.requirement),
                          knobs=[vars(k) for k in knobs], relations=list(args.relations),
                          trials=args.trials)
+        sizing_report.write_html_report(result, staging)
     print(sizing_report.format_result(result))
-    print(f"\nwritten to {out}/ (report.md, frontier.png, answers.csv, grid-*.csv, corners-*.csv)")
+    print(f"\nwritten to {out}/ (report.md, report.html, frontier.png, answers.csv, grid-*.csv, "
+          "corners-*.csv)")
     return 0
 
 
@@ -118,10 +120,11 @@ def _cmd_budget(args: argparse.Namespace) -> int:
         write_provenance(staging, "budget", seed=args.seed, base_study=args.study,
                          requirement=vars(req), points=points, samples=args.samples,
                          trials=args.trials, resamples=args.resamples)
+        budget_report.write_html_report(results, staging)
     for r in results:
         print(budget_report.format_budget(r))
         print()
-    print(f"written to {out}/ (report.md, budget.png, budget-*.csv)")
+    print(f"written to {out}/ (report.md, report.html, budget.png, budget-*.csv)")
     return 0
 
 
