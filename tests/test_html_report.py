@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -117,3 +120,29 @@ def test_run_writes_a_self_contained_report_that_rerenders_identically(tmp_path)
         assert re.search(r"p95|max", c)
     rerender(out)
     assert (out / "report.html").read_bytes() == first
+
+
+SHIPPED = sorted(p.stem for p in (Path(__file__).parent.parent / "studies").glob("*.toml"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_shipped_study_report_is_self_contained_and_deterministic(tmp_path, name):
+    """The acceptance check on every shipped study, at few trials (the report's form does
+    not depend on the trial count): no parse error, no external reference, the same bytes
+    after `montecarlo report`. Prints the size."""
+    out = tmp_path / name
+    run = [sys.executable, "-m", "montecarlo"]
+    trials = {"stabilization": "4", "collimation_layout": "16"}.get(name, "256")
+    done = subprocess.run([*run, "run", f"studies/{name}.toml", "--trials", trials, "-q",
+                           "--out", str(out)], capture_output=True, text=True, timeout=1800)
+    assert done.returncode == 0, done.stderr[-2000:]
+    first = (out / "report.html").read_bytes()
+    text = first.decode()
+    assert parse_errors(text) == []
+    assert external_references(text) == []
+    done = subprocess.run([*run, "report", str(out), "-q"], capture_output=True, text=True,
+                          timeout=1800)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (out / "report.html").read_bytes() == first
+    print(f"{name}: report.html {len(first):,} bytes, {text.count('<figure')} figures")
