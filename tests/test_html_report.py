@@ -122,7 +122,8 @@ def test_run_writes_a_self_contained_report_that_rerenders_identically(tmp_path)
     assert (out / "report.html").read_bytes() == first
 
 
-SHIPPED = sorted(p.stem for p in (Path(__file__).parent.parent / "studies").glob("*.toml"))
+ROOT = Path(__file__).parent.parent
+SHIPPED = sorted(p.stem for p in (ROOT / "studies").glob("*.toml"))
 
 
 @pytest.mark.slow
@@ -135,7 +136,8 @@ def test_every_shipped_study_report_is_self_contained_and_deterministic(tmp_path
     run = [sys.executable, "-m", "montecarlo"]
     trials = {"stabilization": "4", "collimation_layout": "16"}.get(name, "256")
     done = subprocess.run([*run, "run", f"studies/{name}.toml", "--trials", trials, "-q",
-                           "--out", str(out)], capture_output=True, text=True, timeout=1800)
+                           "--out", str(out)], capture_output=True, text=True, timeout=1800,
+                          cwd=ROOT)
     assert done.returncode == 0, done.stderr[-2000:]
     first = (out / "report.html").read_bytes()
     text = first.decode()
