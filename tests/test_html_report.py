@@ -13,6 +13,7 @@ import montecarlo
 from montecarlo.output.html_report import (
     HtmlFigure,
     external_references,
+    figure_svg,
     inline_svg,
     markdown_html,
     parse_errors,
@@ -85,6 +86,21 @@ def test_inline_svg_drops_what_points_outside():
     out = inline_svg(svg)
     assert out == '<svg width="1"><use xlink:href="#g1"/></svg>'
     assert external_references(out) == []
+
+
+def test_a_colorbar_stays_vector_and_the_bytes_repeat():
+    """matplotlib rasterises a colorbar of many colours into a PNG inside the SVG; the report's
+    SVG has none, and the same figure gives the same text twice."""
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    ax = fig.subplots()
+    mesh = ax.pcolormesh(np.arange(12.0).reshape(3, 4))
+    fig.colorbar(mesh, ax=ax)
+    svg = figure_svg(fig)
+    assert "<image" not in svg and external_references(svg) == []
+    assert figure_svg(fig) == svg
 
 
 def test_checks_find_what_they_look_for():

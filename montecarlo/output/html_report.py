@@ -76,9 +76,12 @@ def inline_svg(text: str) -> str:
 
 
 def figure_svg(fig: Any) -> str:
-    """A matplotlib figure as deterministic inline SVG text."""
+    """A matplotlib figure as deterministic inline SVG text, every artist as vectors (a
+    colorbar's rasterised gradient would otherwise be a PNG inside the SVG)."""
     import matplotlib
 
+    for artist in fig.findobj(lambda a: a.get_rasterized()):
+        artist.set_rasterized(False)
     buf = io.StringIO()
     with matplotlib.rc_context(SVG_RC):
         fig.savefig(buf, format="svg", metadata={"Date": None})
