@@ -96,7 +96,10 @@ def diagnose_camera(args: argparse.Namespace) -> int:
     record = {"model": str(args.model), "views": str(args.views), "alpha": args.alpha,
               "pixel_sigma_px": sigma}
     if args.report:
-        from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
+        from montecarlo.output.diagnosis import (  # matplotlib: only for reports
+            write_html_report,
+            write_report,
+        )
 
         with OutputDir(args.report, "diagnose", inputs=inputs) as staging:
             write_report(staging, d, view, report)
@@ -104,6 +107,7 @@ def diagnose_camera(args: argparse.Namespace) -> int:
                 ["# Diagnosis", "", "```", text, "```", "", "![residuals](residuals.png)", "",
                  "![gap](gap.png)", ""]).encode())
             write_provenance(staging, "diagnose", **record)
+            write_html_report(staging, d, view)
     if args.emit_errors:
         toml = cam.errors_toml(error, source, sigma, d.after.effects)
         atomic_write_bytes(Path(args.emit_errors), toml.encode())
@@ -112,8 +116,8 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         return 0
     print(text)
     if args.report:
-        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
-              "gap.png)")
+        print(f"report written to {args.report}/ (report.md, report.html, diagnosis.json, "
+              "residuals.png, gap.png)")
     if args.emit_errors:
         print(f"pixel error for a ground study written to {args.emit_errors} "
               "(use: montecarlo size|run ... --errors FILE)")

@@ -64,7 +64,10 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
     report = to_json(d, view, source)
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
     if args.report:
-        from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
+        from montecarlo.output.diagnosis import (  # matplotlib: only for reports
+            write_html_report,
+            write_report,
+        )
         from montecarlo.systems.discrepancy import monte_carlo_gap
 
         with OutputDir(args.report, "diagnose", inputs=(Path(source),)) as staging:
@@ -75,13 +78,14 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
             with steps("the report's plots", "matplotlib"):
                 write_report(staging, d, view, report, mc, args.trials, args.seed)
             write_provenance(staging, "diagnose", **record)
+            write_html_report(staging, d, view, mc)
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
         steps.report(to_stderr=True)
         return 0
     print(format_text(report))
     if args.report:
-        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
-              "gap.png)")
+        print(f"report written to {args.report}/ (report.md, report.html, diagnosis.json, "
+              "residuals.png, gap.png)")
     steps.report(to_stderr=False)
     return 0
 

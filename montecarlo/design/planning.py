@@ -10,7 +10,9 @@ an upper bound of the p-quantile with confidence c when ``P(B >= k) >= c``, B ~ 
 In metric units the width depends on the distribution, so a pilot run measures it: an
 interval's half-width shrinks as 1 / sqrt(n), so ``n = n0 (h0 / h)^2`` trials give half-width h,
 and a verdict is decided once the half-width is below the distance from the statistic to the
-limit. These are estimates from the pilot, not guarantees; ``run --until-decided`` checks.
+limit. The same holds for a superquantile (``cvarNN``), whose interval is asymptotically normal
+(:mod:`montecarlo.engine.superquantile`). These are estimates from the pilot, not guarantees;
+``run --until-decided`` checks.
 """
 
 from __future__ import annotations
@@ -24,9 +26,15 @@ from scipy.special import bdtr
 
 from montecarlo.engine.aggregate import order_statistic_ranks
 from montecarlo.engine.runner import StudyResult
+from montecarlo.engine.superquantile import cvar_level
 from montecarlo.errors import InputError
 
 PERCENTILES = {"p50": 0.50, "p90": 0.90, "p95": 0.95, "p99": 0.99}
+
+
+def has_interval(statistic: str) -> bool:
+    """True for the statistics with a confidence interval: percentiles and ``cvarNN``."""
+    return statistic in PERCENTILES or cvar_level(statistic) is not None
 
 
 def order_statistic_trials(k: int, p: float, confidence: float) -> int:
@@ -119,7 +127,7 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     study = result.study
     spec = study.spec
     metric = spec.metric if spec else study.metrics[0][1].name
-    stat = spec.statistic if spec and spec.statistic in PERCENTILES else "p95"
+    stat = spec.statistic if spec and has_interval(spec.statistic) else "p95"
     rows = summary[summary["metric"] == metric]
     if spec and spec.variant:
         rows = rows[rows["variant"] == spec.variant]
@@ -132,12 +140,13 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     sampled = (rows["sampling"] != "enumerated").to_numpy()
     unbounded = sampled & np.isnan(half) & ~np.isnan(value)
     if unbounded.any():
-        needed = interval_trials(PERCENTILES[stat], study.header.confidence)
+        level = PERCENTILES.get(stat) or cvar_level(stat)
+        needed = interval_trials(level, study.header.confidence)
         raise InputError(f"plan: a pilot of {int(n0[unbounded].min()):,} trials per grid point "
                          f"cannot bound the {stat} at {study.header.confidence:.0%} confidence "
                          f"(its interval needs at least {needed:,} trials); give --trials "
                          f"{needed:,} or more")
-    if spec is not None and spec.statistic in PERCENTILES:
+    if spec is not None and has_interval(spec.statistic):
         need = trials_to_decide(n0, half, np.abs(value - spec.limit))
         decided = (rows["verdict"] != "undecided").to_numpy()
         out["verdict"] = rows["verdict"].to_numpy()

@@ -39,7 +39,9 @@ from montecarlo.engine.aggregate import (
     SpecCheck,
 )
 from montecarlo.engine.checkpoints import Checkpoints
+from montecarlo.engine.nominal import nominal_values
 from montecarlo.engine.study import Study
+from montecarlo.engine.superquantile import is_cvar_column
 from montecarlo.engine.tasks import PointTask, exit_with_parent, run_task
 from montecarlo.errors import InputError, RunInterrupted
 
@@ -76,6 +78,16 @@ class StudyResult:
     """Grid points taken from checkpoints (``points``) and where (``from``, ``key``)."""
     kernel: str = "reference"
     """``"fast"`` if the system's compiled kernel computed the trials, else ``"reference"``."""
+    nominal: dict[int, dict[tuple[str, str], float]] | None = None
+    """Per grid point, each (variant, metric) in the nominal case [SI units, radians]
+    (:mod:`.nominal`); computed on first use."""
+
+    def nominal_values(self) -> dict[int, dict[tuple[str, str], float]]:
+        """The nominal case of every grid point (one trial each, every error at its centre)."""
+        if self.nominal is None:
+            self.nominal = {gp.index: nominal_values(self.study.system, gp.prepared)
+                            for gp in self.study.points}
+        return self.nominal
 
     def _sweep_value(self, key: str, value: Any) -> Any:
         """Sweep values as they go in a column: text if the key mixes numbers and text."""
@@ -85,10 +97,15 @@ class StudyResult:
     def to_frame(self) -> pd.DataFrame:
         """Summary: one row per (grid point, variant, metric), values in display units."""
         frames = []
+        nominal = self.nominal_values()
         for gp, pr in zip(self.study.points, self.points, strict=True):
             df = pr.summary.copy()
+            df["nominal"] = [nominal[gp.index].get((v, m), math.nan)
+                             for v, m in zip(df["variant"], df["metric"], strict=True)]
             scale = df["metric"].map({m.name: m.scale for _, m in self.study.metrics})
-            values = [c for c in (*VALUE_COLUMNS, *SPEC_COLUMNS) if c in df.columns]
+            values = [c for c in df.columns
+                      if c in VALUE_COLUMNS or c in SPEC_COLUMNS or is_cvar_column(c)
+                      or c == "nominal"]
             df[values] = df[values].mul(scale, axis=0)
             df.insert(0, "point", gp.index)
             for i, key in enumerate(self.study.sweep_keys):

@@ -11,6 +11,7 @@ Layout of a study file::
 
     [spec]                       # optional requirement drawn on plots and checked in reports
     metric = "rotation_angle"; variant = "normalised"; statistic = "p95"; limit = 3.0
+    # statistic: p50/p90/p95/p99, mean, std, max, or cvar95 (mean of the worst 5 %; any cvarNN)
 
     ... the system's own sections (e.g. [sensor], [geometry], [errors] for "ground") ...
 
@@ -38,7 +39,7 @@ import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from pydantic import Field, ValidationError, field_validator
 
@@ -88,7 +89,9 @@ class Spec(Strict):
 
     metric: str
     variant: str | None = None
-    statistic: Literal["mean", "std", "p50", "p90", "p95", "p99", "max"] = "p95"
+    statistic: str = Field(default="p95",
+                           pattern=r"^(mean|std|p50|p90|p95|p99|max|cvar[1-9][0-9]?)$")
+    """A percentile, mean, std, max, or ``cvarNN``: the mean of the worst (100 - NN) %."""
     limit: float = Field(gt=0)
 
 

@@ -28,6 +28,8 @@ from montecarlo.io.files import (
     save_figure,
     update_written_files,
 )
+from montecarlo.output.captions import figure_caption
+from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
@@ -37,7 +39,7 @@ from montecarlo.output.saved import HISTOGRAMS, histogram_table, load_result
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
                   fmt: str = "png") -> Path:
     """Write summary.csv/.parquet, histograms.parquet, trials.parquet (if kept),
-    provenance.json, plots (in ``fmt``) and report.md."""
+    provenance.json, plots (in ``fmt``), report.md and report.html."""
     out_dir = Path(out_dir)
     summary = result.to_frame()
     summary.to_csv(out_dir / "summary.csv", index=False)
@@ -50,8 +52,10 @@ def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
     prov = study_provenance(result, options_record)
     (out_dir / PROVENANCE).write_text(json.dumps(prov, indent=2, default=str))
     (out_dir / "plots").mkdir()
-    names = _draw(result, summary, out_dir / "plots", fmt)
-    (out_dir / "report.md").write_text(render_report(result, summary, prov, names))
+    names, figures = _draw(result, summary, out_dir / "plots", fmt)
+    md = render_report(result, summary, prov, names)
+    (out_dir / "report.md").write_text(md)
+    write_html(out_dir, figures, f"Study {result.study.header.name}", md)
     return out_dir
 
 
@@ -71,22 +75,26 @@ def trials_table(result: StudyResult) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
-def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str) -> list[str]:
+def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str
+          ) -> tuple[list[str], dict[str, HtmlFigure]]:
     """Save every figure into ``plots`` as ``fmt`` (the same bytes on every render, see
-    :func:`montecarlo.io.files.figure_bytes`); returns the file names."""
+    :func:`montecarlo.io.files.figure_bytes`); returns the file names and the figures for
+    report.html (inline SVG with captions), by file name."""
     import matplotlib.pyplot as plt
 
-    names = []
+    names, figures = [], {}
     for name, fig in all_figures(result, summary):
         name = f"{Path(name).stem}.{fmt}"
         save_figure(fig, plots / name, dpi=110)
+        figures[name] = HtmlFigure(figure_svg(fig), figure_caption(result, name))
         plt.close(fig)
         names.append(name)
-    return names
+    return names, figures
 
 
 def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, Any]]:
-    """Draw the plots and write report.md of a result directory again from its saved data.
+    """Draw the plots and write report.md and report.html of a result directory again from its
+    saved data.
 
     The new plots are drawn into a temporary directory beside ``plots/`` and swapped in only
     when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes. A
@@ -105,7 +113,7 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
             raise InputError(f"{path}: {foreign[0]!r} was not written by `montecarlo run`; "
                              "move it out of plots/ before drawing them again")
         names = _redraw(path, result, summary, prov, fmt)
-        update_written_files(path, ("plots", "report.md"))
+        update_written_files(path, ("plots", "report.md", "report.html"))
     return names, prov
 
 
@@ -115,9 +123,10 @@ def _redraw(path: Path, result: StudyResult, summary: pd.DataFrame, prov: dict[s
         shutil.rmtree(stale, ignore_errors=True)
     staging = Path(tempfile.mkdtemp(prefix=".plots.tmp-", dir=path))
     try:
-        names = _draw(result, summary, staging, fmt)
-        atomic_write_bytes(path / "report.md",
-                           render_report(result, summary, prov, names).encode())
+        names, figures = _draw(result, summary, staging, fmt)
+        md = render_report(result, summary, prov, names)
+        atomic_write_bytes(path / "report.md", md.encode())
+        write_html(path, figures, f"Study {result.study.header.name}", md)
         old = path / "plots"
         if old.exists():
             retired = Path(tempfile.mkdtemp(prefix=".plots.old-", dir=path))

@@ -19,6 +19,7 @@ point runs exactly 2**k trials, the corners; its ``max`` is the worst case of Ta
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from dataclasses import dataclass
@@ -219,6 +220,17 @@ class GroundSystem:
 
     def trials_per_point(self, prepared: PreparedGround, requested: int) -> int:
         return requested if self.is_sampled(prepared) else 1 << len(prepared.corners)
+
+    def nominal(self, prepared: PreparedGround) -> PreparedGround:
+        """The grid point with every error source fixed at its centre (its location), corner
+        sources included: the nominal case (:mod:`montecarlo.engine.nominal`)."""
+        def centre(d: Distribution) -> Distribution:  # a lognormal's centre is its median
+            return Distribution("fixed", d.location + (d.scale if d.kind == "lognormal" else 0.0))
+
+        return dataclasses.replace(
+            prepared, mounting=tuple(centre(d) for d in prepared.mounting),  # type: ignore
+            placement={k: centre(d) for k, d in prepared.placement.items()},
+            pixel=centre(prepared.pixel), corners=())
 
     def unit_draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int,
                    buffers: np.ndarray | None = None
