@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all lint nightly bench clean
+.PHONY: install run test test-all lint nightly bench bench-full clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -27,7 +27,10 @@ nightly: install
 	$(BIN)/montecarlo nightly
 
 bench: install
-	$(BIN)/montecarlo bench
+	$(BIN)/montecarlo bench --quick
+
+bench-full: install
+	$(BIN)/montecarlo bench --full
 
 lint: install
 	$(BIN)/ruff check .

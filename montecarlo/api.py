@@ -69,6 +69,15 @@ class Result:
 
         return metric_axes(self._result, self.summary, metric, variant, ax)
 
+    def to_xarray(self) -> Any:
+        """The summary as an ``xarray.Dataset``: one variable per metric over the swept
+        parameters, ``variant`` and ``statistic``, units as attributes (see
+        :mod:`montecarlo.output.gridded`). Needs the optional dependency xarray
+        (``pip install 'montecarlo[xarray]'``)."""
+        from montecarlo.output.gridded import to_xarray
+
+        return to_xarray(self._result, self.summary)
+
     def report(self, directory: str | Path, fmt: str = "png") -> Path:
         """Write what ``montecarlo run`` writes into ``directory`` (absent, empty or an earlier
         result of this study), all or nothing; plots as ``fmt`` (png, svg or pdf)."""

@@ -19,7 +19,8 @@ at least two), since each is one short process spent mostly on Python start-up.
 The manifest is :data:`CASES`. ``argv`` and ``expect`` may use ``{tmp}``, the temporary
 directory. ``files`` are paths under ``tests/data/bad_inputs/``, copied into the temporary
 directory under their base name. ``setup`` maps a path in the temporary directory to a file's
-text, or to ``None`` for an (empty) directory: things the user already has there. A case with
+text, or to ``None`` for an (empty) directory: things the user already has there (``links``:
+their symbolic links). A case with
 ``defect`` set shows a real defect of the package; it is kept and marked ``xfail(strict=True)``
 with the observed behaviour as the reason, so that fixing the defect makes the suite say so.
 
@@ -61,6 +62,8 @@ class Case:
     """The user's own files (path -> text) and folders (path -> None) made before the run."""
     unchanged: tuple[str, ...] = ()
     """Files made by ``setup`` that must be left exactly as they were."""
+    links: dict[str, str] = field(default_factory=dict)
+    """Symbolic links (path -> target) the user has, made after ``setup``."""
     defect: str | None = None
     """Observed defect of the package (the case is then an xfail with this reason)."""
 
@@ -69,6 +72,10 @@ class Case:
 USER_FILE = {"userfile.txt": "my own notes, not results\n"}
 USER_DIR = {"userdir/notes.txt": "my own notes, not results\n"}
 EMPTY_DIR = {"existingdir": None}
+OTHER_RESULTS = {"results/other_study/summary.csv": "another study's results\n",
+                 "results/notes.txt": "my own notes\n"}
+EARLIER_RESULT = '{"kind": "run", "study": "bad_input_base", "files": {}}\n'
+"""provenance.json of an earlier result of valid_ground.toml that wrote nothing else."""
 
 
 
@@ -96,6 +103,7 @@ VALID_STUDY = "studies/valid_ground.toml"
 VALID_COL = "csv/valid_collimation.csv"
 VALID_GROUND = "csv/valid_ground.csv"
 VALID_STAB = "csv/valid_stabilization.csv"
+CAM_MODEL, CAM_VIEWS = "valid_camera_model.csv", "valid_camera_views.csv"
 
 CASES: list[Case] = [
     # ------------------------------------------------------------------ study files (run)
@@ -260,6 +268,80 @@ CASES: list[Case] = [
          absent=("results",)),
     Case("run-unknown-flag-trails", ("run", "valid_ground.toml", "--trails", "10"),
          files=(VALID_STUDY,), expect=("--trails", "10"), absent=("results",)),
+
+    # ------------------------------------------------------------------ where results go
+    Case("run-study-named-dot", ("run", "name_dot.toml", "--quiet"),
+         files=("studies/name_dot.toml",), setup=OTHER_RESULTS,
+         unchanged=tuple(OTHER_RESULTS), expect=("name_dot.toml", "study.name", "'.'")),
+    Case("run-study-named-dot-dot", ("run", "name_dotdot.toml", "--quiet"),
+         files=("studies/name_dotdot.toml",), setup=OTHER_RESULTS,
+         unchanged=tuple(OTHER_RESULTS), expect=("name_dotdot.toml", "study.name", "'..'")),
+    Case("run-out-dot", ("run", "valid_ground.toml", "--out", ".", "--quiet"),
+         files=(VALID_STUDY,), expect=(".:", "current directory"),
+         absent=(".checkpoints", "results")),
+    Case("run-out-dot-dot", ("run", "valid_ground.toml", "--out", "..", "--quiet"),
+         files=(VALID_STUDY,), expect=("..:", "current directory"),
+         absent=(".checkpoints", "results")),
+    Case("run-out-through-a-subdirectory-to-here",
+         ("run", "valid_ground.toml", "--out", "existingdir/..", "--quiet"),
+         files=(VALID_STUDY,), setup=EMPTY_DIR, expect=("existingdir/..", "current directory"),
+         absent=(".checkpoints", "results")),
+    Case("run-out-results-root", ("run", "valid_ground.toml", "--out", "results", "--quiet"),
+         files=(VALID_STUDY,), setup=OTHER_RESULTS, unchanged=tuple(OTHER_RESULTS),
+         expect=("results", "results root")),
+    Case("run-out-earlier-result-holding-a-users-file",
+         ("run", "valid_ground.toml", "--out", "out", "--quiet"), files=(VALID_STUDY,),
+         setup={"out/provenance.json": EARLIER_RESULT, "out/notes.txt": "mine\n"},
+         unchanged=("out/provenance.json", "out/notes.txt"),
+         expect=("out", "'notes.txt'", "did not write"), absent=(".checkpoints",)),
+    Case("run-out-earlier-result-with-an-edited-file",
+         ("run", "valid_ground.toml", "--out", "out", "--quiet"), files=(VALID_STUDY,),
+         setup={"out/provenance.json": EARLIER_RESULT, "out/report.md": "my edits\n"},
+         unchanged=("out/provenance.json", "out/report.md"),
+         expect=("out", "'report.md'", "did not write"), absent=(".checkpoints",)),
+    Case("run-out-symlink-to-users-directory",
+         ("run", "valid_ground.toml", "--out", "link", "--quiet"), files=(VALID_STUDY,),
+         setup=USER_DIR, links={"link": "userdir"}, unchanged=("userdir/notes.txt",),
+         expect=("link", "symbolic link"), absent=(".checkpoints",)),
+    Case("run-out-broken-symlink", ("run", "valid_ground.toml", "--out", "link", "--quiet"),
+         files=(VALID_STUDY,), links={"link": "nowhere"}, expect=("link", "symbolic link"),
+         absent=(".checkpoints", "nowhere")),
+    Case("run-out-directory-holding-the-study",
+         ("run", "studydir/valid_ground.toml", "--out", "studydir", "--quiet"),
+         setup={"studydir/valid_ground.toml": (DATA / VALID_STUDY).read_text(),
+                "studydir/provenance.json": EARLIER_RESULT},
+         unchanged=("studydir/valid_ground.toml",), expect=("studydir", "holds the input")),
+    Case("diagnose-report-directory-holding-the-data",
+         (*DIAG_COL, "data/valid_collimation.csv", *DIAG_COL_OPTS, "--report", "data"),
+         setup={"data/valid_collimation.csv": (DATA / VALID_COL).read_text()},
+         unchanged=("data/valid_collimation.csv",), expect=("data", "holds the input")),
+    Case("schema-out-existing-user-file", ("schema", "--out", "userfile.txt"), setup=USER_FILE,
+         unchanged=("userfile.txt",), expect=("userfile.txt", "exists", "--force")),
+
+    # ------------------------------------------------------------------ bounded work up front
+    Case("run-sweep-of-a-million-points", ("run", "huge_sweep.toml", "--quiet"),
+         files=("studies/huge_sweep.toml",),
+         expect=("huge_sweep.toml", "1,000,000 grid points", "GB", "--max-points"),
+         absent=("results",)),
+    Case("validate-sweep-of-a-million-points", ("validate", "huge_sweep.toml"),
+         files=("studies/huge_sweep.toml",),
+         expect=("huge_sweep.toml", "1,000,000 grid points", "--max-points")),
+    Case("validate-max-points-0", ("validate", "valid_ground.toml", "--max-points", "0"),
+         files=(VALID_STUDY,), expect=("--max-points", "'0'")),
+    Case("run-max-trials-below-the-studys-trials",
+         ("run", "valid_ground.toml", "--until-decided", "--max-trials", "500", "--quiet"),
+         files=(VALID_STUDY,), expect=("--max-trials", "500", "1,000"), absent=("results",)),
+    Case("run-max-trials-without-until-decided",
+         ("run", "valid_ground.toml", "--max-trials", "5000", "--quiet"),
+         files=(VALID_STUDY,), expect=("--max-trials", "--until-decided"), absent=("results",)),
+    Case("plan-pilot-too-small-for-p99", ("plan", "plan_p99.toml", "--trials", "100", "--quiet"),
+         files=("studies/plan_p99.toml",), expect=("pilot of 100", "p99", "--trials 368"),
+         absent=("results",)),
+
+    # ------------------------------------------------------------------ study files, continued
+    study("study-negative-base-replaced-by-sweep", "negative_base_replaced_by_sweep.toml",
+          "geometry.L_m", "-100.0", "base value"),
+    study("study-byte-order-mark", "bom.toml", "byte-order mark", "without BOM"),
 
     # ------------------------------------------------------------------ other commands' flags
     Case("cli-unknown-command", ("frobnicate",), expect=("'frobnicate'",)),
@@ -466,6 +548,8 @@ CASES: list[Case] = [
     csv_case("fit-csv-roll-beyond-180", FIT, "col_roll_beyond_180.csv", "row 5",
              "'ins_roll_deg'", "200.0"),
     csv_case("fit-csv-unknown-set", FIT, "col_unknown_set.csv", "row 4", "'set'", "'roll'"),
+    csv_case("fit-csv-duplicate-mirror", FIT, "col_duplicate_mirror.csv", "row 5", "'mirror'",
+             "'A3'", "repeats row 4"),
     csv_case("fit-csv-too-few-rows", FIT, "col_too_few_rows.csv", "1 data rows"),
     csv_case("fit-csv-header-only", FIT, "col_header_only.csv", "0 data rows"),
     csv_case("fit-csv-ragged-row", FIT, "col_ragged_row.csv", "line 5"),
@@ -486,6 +570,11 @@ CASES: list[Case] = [
              options=DIAG_COL_OPTS),
     csv_case("diagnose-collimation-csv-unknown-set", DIAG_COL, "col_unknown_set.csv", "row 4",
              "'set'", "'roll'", options=DIAG_COL_OPTS),
+    csv_case("diagnose-collimation-csv-duplicate-mirror", DIAG_COL, "col_duplicate_mirror.csv",
+             "row 5", "'mirror'", "'A3'", options=DIAG_COL_OPTS),
+    csv_case("diagnose-collimation-absolute-two-azimuth-mirrors", DIAG_COL,
+             "col_two_azimuth_mirrors.csv", "not separable",
+             options=(*DIAG_COL_OPTS, "--readings", "absolute")),
     csv_case("diagnose-collimation-csv-too-few-rows", DIAG_COL, "col_too_few_rows.csv",
              "1 data rows", options=DIAG_COL_OPTS),
     Case("diagnose-collimation-csv-bad-with-report-and-json",
@@ -518,6 +607,8 @@ CASES: list[Case] = [
              options=DIAG_GROUND_OPTS),
     csv_case("ground-csv-empty-session", DIAG_GROUND, "ground_empty_session.csv", "row 13",
              "'session'", "empty", options=DIAG_GROUND_OPTS),
+    csv_case("ground-csv-duplicate-target", DIAG_GROUND, "ground_duplicate_target.csv", "row 5",
+             "'target'", "'T03'", "repeats row 4", options=DIAG_GROUND_OPTS),
     csv_case("ground-csv-too-few-rows", DIAG_GROUND, "ground_too_few_rows.csv", "3 data rows",
              options=DIAG_GROUND_OPTS),
     csv_case("ground-csv-empty-file", DIAG_GROUND, "empty.csv", "not a readable CSV",
@@ -547,6 +638,49 @@ CASES: list[Case] = [
     csv_case("stabilization-csv-binary-file", ESTIMATE, "binary.csv", "not a readable CSV"),
     Case("stabilization-csv-is-directory", ("stabilization", "estimate", "csvdir"),
          setup={"csvdir": None}, expect=("csvdir", "directory")),
+
+    # ------------------------------------------------------------------ CSV: diagnose camera
+    *[Case(f"camera-{id}", ("diagnose", "camera", model, views, "--pixel-sigma-px", "0.2",
+                            "--report", "report", "--emit-errors", "e.toml"),
+           files=(f"csv/{model}", f"csv/{views}"), expect=expect, absent=("report", "e.toml"))
+      for id, model, views, expect in (
+          ("model-unknown-unit", "camera_model_unknown_unit.csv", CAM_VIEWS,
+           ("camera_model_unknown_unit.csv", "row 6", "'unit'", "'furlong'")),
+          ("model-mixed-units", "camera_model_mixed_unit.csv", CAM_VIEWS,
+           ("camera_model_mixed_unit.csv", "row 9", "'unit'", "'cm'")),
+          ("model-repeated-id", "camera_model_repeated_id.csv", CAM_VIEWS,
+           ("camera_model_repeated_id.csv", "row 4", "'id'", "'2'")),
+          ("model-nan-x", "camera_model_nan_x.csv", CAM_VIEWS,
+           ("camera_model_nan_x.csv", "row 7", "'X'", "'nan'")),
+          ("model-missing-column", "camera_model_missing_column.csv", CAM_VIEWS,
+           ("camera_model_missing_column.csv", "'Y'")),
+          ("views-unknown-id", CAM_MODEL, "camera_views_unknown_id.csv",
+           ("camera_views_unknown_id.csv", "row 12", "'id'", "'99'")),
+          ("views-repeated-point", CAM_MODEL, "camera_views_repeated_point.csv",
+           ("camera_views_repeated_point.csv", "row 14", "'id'", "'12'", "'V1'")),
+          ("views-non-numeric-u", CAM_MODEL, "camera_views_non_numeric_u.csv",
+           ("camera_views_non_numeric_u.csv", "row 20", "'u'", "'12px'")),
+          ("views-two-views", CAM_MODEL, "camera_views_two_views.csv",
+           ("camera_views_two_views.csv", "'view'", "2 views")),
+          ("views-view-with-three-points", CAM_MODEL, "camera_views_view_with_three_points.csv",
+           ("camera_views_view_with_three_points.csv", "row 34", "'view'", "'V3'", "3 points")),
+      )],
+    Case("camera-pixel-sigma-zero", ("diagnose", "camera", CAM_MODEL, CAM_VIEWS,
+                                     "--pixel-sigma-px", "0"),
+         files=(f"csv/{CAM_MODEL}", f"csv/{CAM_VIEWS}"), expect=("--pixel-sigma-px", "'0'")),
+    Case("camera-emit-errors-into-missing-directory",
+         ("diagnose", "camera", CAM_MODEL, CAM_VIEWS, "--pixel-sigma-px", "0.2",
+          "--emit-errors", "nodir/e.toml"),
+         files=(f"csv/{CAM_MODEL}", f"csv/{CAM_VIEWS}"), expect=("nodir/e.toml",),
+         absent=("nodir",)),
+    Case("run-errors-file-with-a-study-table", ("run", "valid_ground.toml", "--errors",
+                                                "errors_extra_table.toml", "--quiet"),
+         files=(VALID_STUDY, "studies/errors_extra_table.toml"),
+         expect=("errors_extra_table.toml", "[errors]", "study"), absent=("results",)),
+    Case("size-errors-file-negative-sigma", ("size", "--limit", "3", "--errors",
+                                             "errors_negative_sigma.toml"),
+         files=("studies/errors_negative_sigma.toml",),
+         expect=("errors_negative_sigma.toml", "errors.pixel_px", "-0.3"), absent=("results",)),
 
     # ------------------------------------------------------------------ CSV: budget --from-sizing
     csv_case("budget-answers-missing-relation-column", ("budget", *BUDGET_CHEAP, "--from-sizing"),
@@ -601,6 +735,8 @@ def prepare(case: Case, work: Path) -> None:
         else:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(text)
+    for rel, target in case.links.items():
+        (work / rel).symlink_to(target)
 
 
 def fill(text: str, work: Path) -> str:

@@ -20,5 +20,16 @@ def test_bench_quick_json_has_every_figure():
         assert r[key] > 0, key
     assert r["stabilization_ratio"] == pytest.approx(
         r["stabilization_fast_trials_per_s"] / r["stabilization_reference_trials_per_s"])
-    assert [s["trials"] for s in r["scaling"]] == [10**4, 10**5, 10**6]
-    assert r["compile_seconds_cold_cache"] > 0
+    assert [s["trials"] for s in r["scaling"]] == [10**5, 10**6]
+    assert r["compile_seconds_cold_cache"] is None  # measured by --full only
+    stages = r["roofline"]["stages"]
+    assert [s["stage"] for s in stages] == ["draws", "solve", "metrics", "accumulation"]
+    for s in stages:
+        assert s["ns_per_trial"] > 0 and s["ceiling_ns_per_trial"] > 0
+        assert s["fraction"] == pytest.approx(s["ceiling_ns_per_trial"] / s["ns_per_trial"])
+    assert r["roofline"]["total_ns_per_trial"] == pytest.approx(
+        sum(s["ns_per_trial"] for s in stages), rel=0.2)  # medians of each, not of the sum
+    assert "roofline of the fused ground path" in subprocess.run(
+        [sys.executable, "-c", "from montecarlo.tools.bench import format_bench; import json, "
+         "sys; print(format_bench(json.load(sys.stdin)))"], input=out.stdout,
+        capture_output=True, text=True, check=True).stdout

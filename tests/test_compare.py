@@ -2,15 +2,25 @@
 independent samples are judged on their intervals, different studies are refused."""
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+from scipy.stats import norm
 
 from montecarlo.errors import InputError
-from montecarlo.output.compare import compare_runs, load_run, verdict_counts
+from montecarlo.output.compare import (
+    STATISTICS,
+    Run,
+    compare_runs,
+    load_run,
+    simultaneous_z,
+    verdict_counts,
+)
 
 STUDY = """
 [study]
@@ -132,3 +142,84 @@ def test_different_studies_and_foreign_directories_are_refused(runs, tmp_path):
     assert done.returncode == 2 and "provenance.json" in done.stderr
     done = _cli(str(runs["a"]), str(runs["again"]), "--statistic", "p42")
     assert done.returncode == 2
+
+
+# --- every documented statistic, and the statistics of the intervals ---------------------------
+
+
+@pytest.mark.parametrize("statistic", STATISTICS)
+def test_every_statistic_of_compare_runs_through_the_command_line(runs, statistic):
+    """`compare --statistic std` crashed (duplicate column, exit 1 'worse'); every statistic
+    the command documents now gives a verdict on every row, and two samples of one model are
+    never 'worse'."""
+    done = _cli(str(runs["a"]), str(runs["other_seed"]), "--statistic", statistic, "--json")
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+    data = json.loads(done.stdout)
+    assert data["statistic"] == statistic and data["counts"]["worse"] == 0
+    rows = data["rows"]
+    assert rows and all(r["comparison"] == "independent" for r in rows)
+    expected = {"undecided"} if statistic == "max" else {"same"}
+    assert {r["verdict"] for r in rows} == expected
+    paired = compare_runs(load_run(runs["a"]), load_run(runs["again"]), statistic)
+    assert set(paired["verdict"]) == {"same"} and (paired["diff"] == 0.0).all()
+
+
+def test_a_study_whose_spec_statistic_is_std_compares_by_default(runs, tmp_path):
+    """Plain `compare A B` takes the spec's statistic; a spec on `std` made it crash."""
+    copies = []
+    for name in ("a", "again"):
+        copy = tmp_path / name
+        shutil.copytree(runs[name], copy)
+        prov = json.loads((copy / "provenance.json").read_text())
+        prov["resolved_study"]["spec"]["statistic"] = "std"
+        (copy / "provenance.json").write_text(json.dumps(prov))
+        copies.append(copy)
+    done = _cli(*map(str, copies), "--json")
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    assert data["statistic"] == "std" and data["counts"]["same"] == len(data["rows"]) > 0
+
+
+def _synthetic(tag: str, m: int, count: int, std: float, mean: float) -> Run:
+    """A result of m grid points with the given count, std and mean on every row."""
+    summary = pd.DataFrame({"point": range(m), "geometry.L_m": [10.0 * (i + 1) for i in range(m)],
+                            "variant": "raw", "metric": "rotation_angle", "unit": "mrad",
+                            "sampling": "random", "count": count, "mean": mean, "std": std})
+    prov = {"kind": "run", "study": "synthetic", "study_hash": tag,
+            "resolved_study": {"study": {"confidence": 0.95}}}
+    return Run(Path(tag), summary, prov)
+
+
+@pytest.mark.parametrize("m", [1, 2, 7, 40])
+def test_independent_intervals_are_simultaneous_over_the_rows_bonferroni(m):
+    """Half-width = Phi^-1(1 - (1 - c)/(2 m)) se for m rows compared, se of a mean = s/sqrt(n)
+    per run, combined as independent errors: sqrt(2) s / sqrt(n) for two equal runs (scipy's
+    normal quantile as the reference; 1.95996 at m = 1)."""
+    n, s = 400, 3.0
+    table = compare_runs(_synthetic("a", m, n, s, 1.0), _synthetic("b", m, n, s, 1.5), "mean")
+    z = norm.ppf(1.0 - 0.05 / (2 * m))
+    se = np.sqrt(2.0) * s / np.sqrt(n)
+    np.testing.assert_allclose(table["diff_hi"] - table["diff"], z * se, rtol=1e-12)
+    np.testing.assert_allclose(table["diff"] - table["diff_lo"], z * se, rtol=1e-12)
+    assert simultaneous_z(0.95, m) == pytest.approx(norm.ppf(1 - 0.025 / m), rel=1e-12)
+    if m == 1:
+        assert simultaneous_z(0.95, 1) == pytest.approx(1.959964, abs=1e-6)
+
+
+def test_the_standard_error_of_std_matches_a_monte_carlo_of_normal_samples():
+    """se(s) = sigma / sqrt(2 (n - 1)) for normal data (var(s^2) = 2 sigma^4 / (n - 1), so the
+    variance's se is sigma^2 sqrt(2 / (n - 1))). Reference: the spread of s over R = 4000
+    seeded samples of n = 200 draws of N(0, 2^2); that spread is itself known to relative
+    1/sqrt(2 (R - 1)) = 1.1 %, so 4 % is 3.5 of its standard errors."""
+    n, sigma, reps = 200, 2.0, 4000
+    rng = np.random.default_rng(7)
+    s = rng.normal(0.0, sigma, size=(reps, n)).std(axis=1, ddof=1)
+    table = compare_runs(_synthetic("a", 1, n, sigma, 0.0), _synthetic("b", 1, n, sigma, 0.0),
+                         "std")
+    se_each = (table["diff_hi"] - table["diff"]).iloc[0] / (simultaneous_z(0.95, 1)
+                                                             * np.sqrt(2.0))
+    assert se_each == pytest.approx(sigma / np.sqrt(2 * (n - 1)), rel=1e-12)
+    assert se_each == pytest.approx(s.std(ddof=1), rel=0.04)
+    variance_se = np.sqrt(2.0 / (n - 1)) * sigma ** 2
+    assert (s ** 2).std(ddof=1) == pytest.approx(variance_se, rel=0.06)

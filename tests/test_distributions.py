@@ -187,7 +187,7 @@ def test_each_shape_runs_from_a_study_file(tmp_path, source, spread):
                                "--out", str(tmp_path / name)], capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
         trials = pd.read_parquet(tmp_path / name / "trials.parquet")
-        return float(trials["normalised/delta_psi"].std())
+        return float(trials["normalised/delta_psi_mrad"].std())
 
     # the yaw error is linear in dx at these sizes: its spread scales with the source's
     ratio = spread_of(source, "shape") / spread_of(f'{{dist = "normal", sigma = {spread}}}',

@@ -10,7 +10,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "montecarlo"
 LAYERS = (
     ("units", "errors", "lsq", "jit"),
     ("geometry",),
-    ("seed000", "seed001", "seed003"),
+    ("seed000", "seed001", "seed003", "camera_calibration"),
     ("io",),
     ("engine",),
     ("discrepancy",),

@@ -62,7 +62,24 @@ def test_files_written(run_dir):
     assert {"histograms.png", "map_L_H.png", "trend_geometry_L_m.png",
             "trend_geometry_H_m.png"} <= plots
     trials = pd.read_parquet(out / "trials.parquet")
-    assert len(trials) == 6 * 2000 and "normalised/rotation_angle" in trials
+    assert len(trials) == 6 * 2000 and "normalised/rotation_angle_mrad" in trials
+
+
+def test_trials_parquet_holds_the_summarys_unit_named_in_its_columns(run_dir):
+    """trials.parquet held rad under a bare name while summary.csv holds mrad: its columns now
+    name their unit and hold the summary's values (the max of each point's per-trial values is
+    the summary's max, the mean its mean)."""
+    _, out = run_dir
+    trials = pd.read_parquet(out / "trials.parquet")
+    summary = pd.read_csv(out / "summary.csv")
+    value_columns = [c for c in trials.columns if c not in ("point", "trial")]
+    assert value_columns and all(c.endswith("_mrad") for c in value_columns)
+    for (variant, metric), row in summary.set_index(["variant", "metric"]).groupby(level=[0, 1]):
+        for point, r in row.reset_index().set_index("point").iterrows():
+            values = trials.loc[trials["point"] == point, f"{variant}/{metric}_mrad"]
+            magnitude = values.abs() if r["percentiles_of"] == "abs" else values
+            assert r["max"] == pytest.approx(magnitude.max(), rel=1e-12)
+            assert r["mean"] == pytest.approx(values.mean(), rel=1e-9)
 
 
 def test_summary_columns_and_units(run_dir):
@@ -122,3 +139,35 @@ def test_rebin_spreads_log_bins_evenly():
     h = _rebin(lower, upper, counts, 1.0, np.linspace(0.0, 8.0, 17))
     np.testing.assert_allclose(h, 5.0)
     assert h.sum() == counts.sum()
+
+
+def test_a_successful_run_removes_its_studys_stale_checkpoints_only(tmp_path):
+    """Checkpoints of older source versions were never removed. After a successful run, the
+    study's checkpoints saved by another code fingerprint (or package version) go; another
+    study's, the same name with another study hash, and a folder without a key stay."""
+    from montecarlo.engine.checkpoints import KEY_FILE, Checkpoints
+    from montecarlo.systems import load_study
+
+    p = tmp_path / "out.toml"
+    p.write_text(textwrap.dedent(STUDY).replace("per_trial = true", "per_trial = false"))
+    root = tmp_path / ".checkpoints"
+    key = Checkpoints(root, load_study(p)).key
+    made = {}
+    for name, folder, record in [
+            ("old_code", "out-00000000000000a1", {**key, "code": "0" * 64}),
+            ("old_version", "out-00000000000000a2", {**key, "version": "0.0.1"}),
+            ("other_study", "other-00000000000000a3", {**key, "code": "0" * 64}),
+            ("other_hash", "out-00000000000000a4", {**key, "study": "f" * 64, "code": "0"}),
+            ("no_key", "out-00000000000000a5", None)]:
+        d = root / folder
+        d.mkdir(parents=True)
+        (d / "point-000000.pkl").write_bytes(b"old")
+        if record is not None:
+            (d / KEY_FILE).write_text(json.dumps(record))
+        made[name] = d
+    assert main(["run", str(p), "--quiet", "--out", str(tmp_path / "out")]) == 0
+    assert not made["old_code"].exists() and not made["old_version"].exists()
+    assert made["other_study"].exists() and made["other_hash"].exists()
+    assert made["no_key"].exists()
+    assert sorted(d.name for d in root.iterdir()) == sorted(
+        made[n].name for n in ("other_study", "other_hash", "no_key"))

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from montecarlo.cli import main
+from montecarlo.errors import InputError
 from montecarlo.systems import load_study
 
 STUDIES = sorted(Path(__file__).parent.parent.glob("studies/*.toml"))
@@ -155,3 +156,62 @@ def test_real_process_exit_code(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "geometry.L_m" in out.stderr
+
+
+def test_grid_size_is_counted_before_expanding_and_limited_by_max_points(tmp_path, capsys):
+    """product 3 x 2 = 6, times zip 4, times one_at_a_time 1 + 2 + 1 = 4: 96 points (by hand),
+    counted from the lists alone; --max-points 95 refuses the study in one line naming the
+    count and a memory estimate, 96 admits it, and the default limit refuses a million points
+    within a second (validate was still expanding after 120 s at 4.7 GB)."""
+    import time
+
+    from montecarlo.engine.study import BYTES_PER_POINT, MAX_POINTS, _expand, grid_size
+
+    groups = [("product", {"a": [1, 2, 3], "b": [1, 2]}), ("zip", {"c": [1, 2, 3, 4],
+                                                               "d": [5, 6, 7, 8]}),
+              ("one_at_a_time", {"e": [1, 2], "f": [3]})]
+    assert grid_size(groups) == 96 == len(_expand(groups))
+    sweep = """
+    [[sweep]]
+    "geometry.L_m" = [40.0, 50.0, 60.0]
+    "geometry.H_m" = [1.0, 2.0]
+    [[sweep]]
+    mode = "zip"
+    "errors.pixel_px.sigma" = [0.1, 0.2, 0.3, 0.4]
+    "sensor.pixels" = [[512, 512], [640, 480], [1024, 768], [2048, 2048]]
+    [[sweep]]
+    mode = "one_at_a_time"
+    "mounting.psi_deg" = [10.0, 20.0]
+    "mounting.theta_deg" = [5.0]
+    """
+    p = write(tmp_path, BASE + "[mounting]\npsi_deg = 30.0\ntheta_deg = 0.0\ngamma_deg = 0.0\n"
+              + sweep)
+    assert main(["validate", str(p), "--max-points", "95"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "96 grid points" in err and "--max-points" in err
+    assert f"{96 * BYTES_PER_POINT / 1e6:.3g} MB" in err
+    assert main(["validate", str(p), "--max-points", "96"]) == 0
+    ranges = ", ".join(f"{v:.1f}" for v in range(10, 1010))
+    sigmas = ", ".join(f"{v / 1000:.3f}" for v in range(1, 1001))
+    huge = write(tmp_path, BASE + f'[[sweep]]\n"geometry.L_m" = [{ranges}]\n'
+                 f'"errors.pixel_px.sigma" = [{sigmas}]\n', "huge.toml")
+    start = time.monotonic()
+    assert main(["validate", str(huge)]) == 2
+    assert time.monotonic() - start < 5.0
+    assert f"1,000,000 grid points (about 150 GB of memory) exceed the limit of {MAX_POINTS:,}" \
+        in capsys.readouterr().err
+
+
+def test_an_errors_file_updates_the_study_errors_key_by_key(tmp_path):
+    """``--errors FILE``: the file's [errors] keys replace the study's, the others stay."""
+    from montecarlo.engine.study import merge_errors_file
+
+    raw = {"study": {"name": "s"}, "errors": {"pixel_px": 0.3, "dx_m": 0.1}}
+    path = tmp_path / "e.toml"
+    path.write_text('[errors]\npixel_px = { dist = "normal", sigma = 0.8 }\n')
+    merged = merge_errors_file(raw, path)
+    assert merged["errors"] == {"pixel_px": {"dist": "normal", "sigma": 0.8}, "dx_m": 0.1}
+    assert raw["errors"]["pixel_px"] == 0.3  # the study given is not changed
+    path.write_text('[errors]\npixel_px = 0.5\n[geometry]\nL_m = 1.0\n')
+    with pytest.raises(InputError, match=r"e.toml: .*nothing else \(got: geometry\)"):
+        merge_errors_file(raw, path)

@@ -10,6 +10,7 @@ from typing import Any
 
 from montecarlo.cli.common import (
     add_json_option,
+    add_max_points_option,
     add_n_jobs_option,
     check_json_option,
     emit_json,
@@ -30,7 +31,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from montecarlo.systems import load_study
 
     check_json_option(args)
-    study = load_study(args.study, trials=args.trials)
+    study = load_study(args.study, trials=args.trials, max_points=args.max_points)
     options = checked_options(study, RunOptions(n_jobs=args.n_jobs))
     cores = options.n_jobs or 1
     reference = uses_reference(study, options)
@@ -71,7 +72,10 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 
     text = json.dumps(study_schema(args.system), indent=2, default=str) + "\n"
     if args.out:
-        write_text(args.out, text)
+        out = Path(args.out)
+        if (out.exists() or out.is_symlink()) and not args.force:
+            raise InputError(f"{out}: exists; choose another name or add --force to replace it")
+        write_text(out, text)
         print(f"wrote {args.out}")
     else:
         print(text, end="")
@@ -142,6 +146,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("study", help="study definition (TOML)")
     p.add_argument("--trials", type=positive_int, help="as `run --trials` would override")
     add_n_jobs_option(p)
+    add_max_points_option(p)
     add_json_option(p, "the checked study")
     p.set_defaults(func=_cmd_validate)
 
@@ -149,6 +154,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("system", nargs="?", type=_system_name,
                    help="the system's full schema (default: the common sections)")
     p.add_argument("--out", help="write it to this file instead of printing it")
+    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     p.set_defaults(func=_cmd_schema)
 
     p = sub.add_parser("init", help="write a commented starter study for a system")

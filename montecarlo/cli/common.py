@@ -51,6 +51,16 @@ def add_n_jobs_option(p: argparse.ArgumentParser) -> None:
                    help="workers (default: the cores; small work runs in this process)")
 
 
+def add_max_points_option(p: argparse.ArgumentParser) -> None:
+    """``--max-points N``: the most grid points a study's sweep may expand to."""
+    from montecarlo.engine.study import BYTES_PER_POINT, MAX_POINTS
+
+    p.add_argument("--max-points", type=positive_int, default=MAX_POINTS, metavar="N",
+                   help=f"refuse a sweep of more than N grid points before expanding it "
+                   f"(default {MAX_POINTS:,}; about {BYTES_PER_POINT // 1000} kB of memory "
+                   "each)")
+
+
 def add_json_option(p: argparse.ArgumentParser, what: str) -> None:
     """``--json [PATH]``: print ``what`` as JSON instead of text, or also write it to PATH."""
     p.add_argument("--json", nargs="?", const="-", metavar="PATH",

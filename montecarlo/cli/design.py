@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,7 +22,9 @@ from montecarlo.cli.common import (
     write_provenance,
 )
 from montecarlo.errors import InputError
-from montecarlo.io.files import OutputDir
+from montecarlo.io.files import OutputDir, writable_file
+
+RELATIONS = ("common", "independent")
 
 
 def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
@@ -30,9 +33,20 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     from montecarlo.engine.study import read_study_file
     from montecarlo.systems import study_from_dict
 
+    errors = getattr(args, "errors", None)
     if args.study is None:
-        return sizing_problem.DEFAULT_DESIGN, None
+        if errors is None:
+            return sizing_problem.DEFAULT_DESIGN, None
+        from montecarlo.engine.study import merge_errors_file
+
+        raw = merge_errors_file(sizing_problem.DEFAULT_DESIGN, errors)
+        study_from_dict(raw, errors)  # a bad value named, before any work
+        return raw, None
     raw = read_study_file(args.study)
+    if errors is not None:
+        from montecarlo.engine.study import merge_errors_file
+
+        raw = merge_errors_file(raw, errors)
     study = study_from_dict(raw, args.study)  # every mistake named in the file, before any work
     if study.header.system != "ground":
         raise InputError(f"{args.study}: study.system: sizing and budgets need a ground study "
@@ -67,6 +81,8 @@ def _cmd_size(args: argparse.Namespace) -> int:
                             float_of("--vary", name, hi if sep else lo))
     else:
         bounds = dict(sizing_problem.DEFAULT_BOUNDS)
+        if args.errors:  # the pixel error is known: no longer a knob
+            bounds.pop("pixel_px")
     unknown = set(weights) - set(bounds)
     if unknown:
         raise InputError(f"--weight: {', '.join(sorted(unknown))} is not a varied knob")
@@ -88,16 +104,30 @@ def _cmd_size(args: argparse.Namespace) -> int:
                          base_study=args.study, requirement=vars(problem.requirement),
                          knobs=[vars(k) for k in knobs], relations=list(args.relations),
                          trials=args.trials)
+        sizing_report.write_html_report(result, staging)
     print(sizing_report.format_result(result))
-    print(f"\nwritten to {out}/ (report.md, frontier.png, answers.csv, grid-*.csv, corners-*.csv)")
+    print(f"\nwritten to {out}/ (report.md, report.html, frontier.png, answers.csv, grid-*.csv, "
+          "corners-*.csv)")
     return 0
 
 
 def _cmd_budget(args: argparse.Namespace) -> int:
-    from montecarlo.design import budget, budget_report
+    from montecarlo.design import budget, budget_report, problem_spec
     from montecarlo.design.sizing_problem import KNOBS
 
     base, spec = _design_base(args)
+    if args.problem_spec:
+        writable_file(args.problem_spec)
+    if args.from_problem_spec:
+        given = problem_spec.read_problem_spec(args.from_problem_spec)
+        base, relation = problem_spec.apply_problem_spec(base, given, args.from_problem_spec)
+        if relation is not None and args.relations != [relation]:
+            if args.relations != list(RELATIONS):  # asked for another one
+                raise InputError(f"--relations: {args.from_problem_spec} has the pixel factors "
+                                 f"of the {relation!r} relation (got {', '.join(args.relations)})")
+            args.relations = [relation]
+        if given.get("outputs") and args.metric is None:
+            args.metric = str(given["outputs"][0])
     point = {n: float_of("--point", n, v) for n, v in args.point}
     for n in point:
         if n not in KNOBS:
@@ -117,10 +147,20 @@ def _cmd_budget(args: argparse.Namespace) -> int:
         write_provenance(staging, "budget", seed=args.seed, base_study=args.study,
                          requirement=vars(req), points=points, samples=args.samples,
                          trials=args.trials, resamples=args.resamples)
+        budget_report.write_html_report(results, staging)
+    if args.problem_spec:
+        target = Path(args.problem_spec)
+        for r in results:
+            path = target if len(results) == 1 else \
+                target.with_name(f"{target.stem}-{r.relation}{target.suffix}")
+            assert r.problem is not None
+            problem_spec.write_problem_spec(path, problem_spec.problem_spec(
+                r.problem, r.requirement.metric))
+            print(f"SALib problem ({r.relation}) written to {path}")
     for r in results:
         print(budget_report.format_budget(r))
         print()
-    print(f"written to {out}/ (report.md, budget.png, budget-*.csv)")
+    print(f"written to {out}/ (report.md, report.html, budget.png, budget-*.csv)")
     return 0
 
 
@@ -158,8 +198,8 @@ def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
                    "(mrad for angles; default: the study's [spec])")
     p.add_argument("--confidence", type=probability, default=0.9,
                    help="confidence of the percentile bounds (default 0.9)")
-    p.add_argument("--relations", nargs="+", choices=("common", "independent"),
-                   default=["common", "independent"], help="pixel-noise relations (both)")
+    p.add_argument("--relations", nargs="+", choices=RELATIONS, default=list(RELATIONS),
+                   help="pixel-noise relations (both)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (default 0)")
     add_n_jobs_option(p)
 
@@ -173,7 +213,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     study = load_study(args.study)
     h, spec = study.header, study.spec
     stat = spec.statistic if spec else "p95"
-    p = planning.PERCENTILES.get(stat, args.coverage)
+    # a superquantile's tail starts at its level's quantile: the counts below are for that
+    p = planning.PERCENTILES.get(stat) or planning.cvar_level(stat) or args.coverage
     c = h.confidence
     if not 0.0 < args.level_width < min(p, 1.0 - p):
         raise InputError(f"--level-width: must be below {min(p, 1.0 - p):g} for the "
@@ -197,6 +238,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         f"k={k}: n={n:,}" for k, n in free.itertuples(index=False)))
     print(f"  the {c:.0%} interval of the {p:g}-quantile spans at most ±{args.level_width:g} "
           f"in quantile level from {level_n:,} trials")
+    if planning.cvar_level(stat):
+        print(f"  {stat} (mean of the worst {1 - p:.0%}): its interval is asymptotically "
+              f"normal, not distribution-free; within 2 points of its coverage from "
+              f"{math.ceil(250 / (1 - p)):,} trials (250 in the tail)")
     print(f"from a pilot of {pilot_trials:,} trials per grid point (estimates: the interval "
           "half-width shrinks as 1/sqrt(n); `run --until-decided` checks):")
     print(table.to_string(index=False))
@@ -242,6 +287,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--confirm-seed", type=nonnegative_int,
                    help="seed of the independent confirmation run (default seed + 1)")
     p.add_argument("--no-confirm", action="store_true", help="skip the confirmation run")
+    p.add_argument("--errors", metavar="FILE.toml", help="update the base design's [errors] "
+                   "from this file (e.g. diagnose camera --emit-errors); pixel_px is then fixed "
+                   "unless --vary names it")
     p.add_argument("--out", default="results/sizing", help="output directory")
     p.set_defaults(func=_cmd_size)
 
@@ -259,5 +307,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="bootstrap resamples for the Sobol intervals (default 200)")
     p.add_argument("--trials", type=positive_int, default=20000,
                    help="trials of the study runs (design total, sources alone; default 20000)")
+    p.add_argument("--problem-spec", metavar="OUT.json",
+                   help="also write the Sobol factors as a SALib problem (ProblemSpec JSON; "
+                   "OUT-<relation>.json for each of several relations)")
+    p.add_argument("--from-problem-spec", metavar="IN.json",
+                   help="take the error sources from a SALib problem (ProblemSpec JSON); its "
+                   "pixel factor names set the relation")
     p.add_argument("--out", default="results/budget", help="output directory")
     p.set_defaults(func=_cmd_budget)

@@ -1,10 +1,11 @@
-"""The discrepancy workflow: ``diagnose ground | collimation | stabilization``,
+"""The discrepancy workflow: ``diagnose ground | collimation | stabilization | camera``,
 ``synth ground | collimation``."""
 
 from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,6 +27,7 @@ from montecarlo.cli.common import (
     write_provenance,
     write_text,
 )
+from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
@@ -33,6 +35,7 @@ from montecarlo.units import ARCSEC
 if TYPE_CHECKING:
     from montecarlo.discrepancy.engine import Diagnosis
     from montecarlo.discrepancy.view import SystemView
+    from montecarlo.io.collimation_csv import MirrorData
 
 
 def _unit(unit: str) -> str:
@@ -42,7 +45,7 @@ def _unit(unit: str) -> str:
 def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before any work, a --report directory or --json file that cannot be written."""
     if args.report:
-        OutputDir(args.report, "diagnose").check()
+        OutputDir(args.report, "diagnose", inputs=(Path(args.data),)).check()
     check_json_option(args)
 
 
@@ -54,7 +57,7 @@ def _check_files(args: argparse.Namespace) -> None:
 
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
-                      source: str, extra: dict | None = None,
+                      source: str, steps: Steps, extra: dict | None = None,
                       preface: tuple[str, ...] = ()) -> int:
     from montecarlo.discrepancy.view import format_text, to_json
     from montecarlo.output.provenance import provenance
@@ -62,29 +65,40 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
     report = {**to_json(d, view, source), **(extra or {})}
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
     if args.report:
-        from montecarlo.output.diagnosis import write_report  # matplotlib: only for reports
+        from montecarlo.output.diagnosis import (  # matplotlib: only for reports
+            write_html_report,
+            write_report,
+        )
         from montecarlo.systems.discrepancy import monte_carlo_gap
 
-        with OutputDir(args.report, "diagnose") as staging:
-            mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
-                if args.trials > 0 else None
-            write_report(staging, d, view, report, mc, args.trials, args.seed)
+        with OutputDir(args.report, "diagnose", inputs=(Path(source),)) as staging:
+            with steps("the report's Monte Carlo", f"{args.trials} simulated data sets per "
+                       "model, each fitted; --trials sets how many"):
+                mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
+                    if args.trials > 0 else None
+            with steps("the report's plots", "matplotlib"):
+                write_report(staging, d, view, report, mc, args.trials, args.seed)
             write_provenance(staging, "diagnose", **record)
+            write_html_report(staging, d, view, mc)
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
+        steps.report(to_stderr=True)
         return 0
     print("\n".join([*preface, format_text(report)]))
     if args.report:
-        print(f"report written to {args.report}/ (report.md, diagnosis.json, residuals.png, "
-              "gap.png)")
+        print(f"report written to {args.report}/ (report.md, report.html, diagnosis.json, "
+              "residuals.png, gap.png)")
+    steps.report(to_stderr=False)
     return 0
 
 
 def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import ground_effects as ge
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.geometry.camera import Camera
-    from montecarlo.io.ground_csv import read_ground_csv
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import ground_effects as ge
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.ground_csv import read_ground_csv
 
     _check_outputs(args)
     try:
@@ -98,24 +112,27 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     ge.check_in_front(data, camera, str(args.data))
     sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
-        d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
-                     args.alpha)
+        with steps("the diagnosis", fit_why(2 * len(data.pixels), 6)):
+            d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
+                         args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
-                                                     args.refraction_k), str(args.data))
+                                                     args.refraction_k), str(args.data), steps)
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import collimation_effects as ce
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.io.collimation_csv import read_mirror_csv
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import collimation_effects as ce
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.io.collimation_csv import read_mirror_csv
 
     _check_outputs(args)
     sigma = args.angle_sigma_arcsec * ARCSEC
     if args.readings == "reference":
-        return _diagnose_procedure(args, sigma)
+        return _diagnose_procedure(args, sigma, steps)
     for flag, used in (("--roll-mirror", args.roll_mirror),
                        ("--azimuth-sense", args.azimuth_sense),
                        ("--roll-sigma-deg", args.roll_sigma_deg)):
@@ -123,30 +140,53 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
             raise InputError(f"{flag}: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
+    _check_separable(args.data, data)
     try:
-        d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
+        with steps("the diagnosis", fit_why(2 * len(data.sets), 4)):
+            d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data))
+    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps)
+
+
+def _check_separable(path: str, data: MirrorData) -> None:
+    """Refuse mirrors that ``collimation fit --readings absolute`` refuses: its base model
+    (frame heading and the optical-axis offsets) must be determined before any effect is
+    looked for (e.g. mirrors all at one elevation leave axis_az and frame_heading confounded).
+    """
+    from montecarlo.seed003.fit import NotSeparable, fit
+
+    try:
+        fit(data.theodolite_az, data.theodolite_el, data.ins_az, data.ins_el, data.ins_roll)
+    except NotSeparable as exc:
+        raise InputError(f"{path}: {exc}") from None
 
 
 def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
-    from montecarlo.discrepancy import stabilization_effects as ste
-    from montecarlo.discrepancy.engine import diagnose
-    from montecarlo.discrepancy.fit import FitError
-    from montecarlo.discrepancy.view import format_text, to_json
-    from montecarlo.geometry.camera import Camera
-    from montecarlo.io.stabilization_csv import read_csv
-    from montecarlo.output.provenance import provenance
-    from montecarlo.units import DEG_PER_ROOT_HOUR
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import stabilization_effects as ste
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.discrepancy.view import format_text, to_json
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.stabilization_csv import read_csv
+        from montecarlo.output.provenance import provenance
+        from montecarlo.units import DEG_PER_ROOT_HOUR
 
     check_json_option(args)
-    record = read_csv(args.data)
+    with steps("reading the recording", "a CSV row per sample"):
+        record = read_csv(args.data)
     camera = Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
     gyro_noise = args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR
+    n = len(record.t)
     try:
-        d = diagnose(ste.stabilization_problem(record, camera, args.image_noise_px, gyro_noise,
-                                               args.mount, args.gyro_sampling), args.alpha)
+        with steps("the estimator's start", f"recursive least squares over the {n} samples, "
+                   "then the image walk's Kalman whitening"):
+            problem = ste.stabilization_problem(record, camera, args.image_noise_px,
+                                                gyro_noise, args.mount, args.gyro_sampling)
+        with steps("the diagnosis", fit_why(2 * n, len(problem.base.parameters))):
+            d = diagnose(problem, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
@@ -155,12 +195,20 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
                    "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
                    "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
+        steps.report(to_stderr=True)
         return 0
     print(format_text(report))
+    steps.report(to_stderr=False)
     return 0
 
 
-def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
+def _cmd_diagnose_camera(args: argparse.Namespace) -> int:
+    from montecarlo.cli.camera import diagnose_camera
+
+    return diagnose_camera(args)
+
+
+def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) -> int:
     """``diagnose collimation --readings reference``: the procedure's reading model as base.
 
     The roll-mirror side and the azimuth sense are taken from the data under ``auto`` (the base
@@ -184,7 +232,8 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
     try:
         data, side, choices = pe.choose_conventions(data, sigma, args.roll_mirror or "auto",
                                                     args.azimuth_sense or "auto", prior)
-        d = diagnose(pe.procedure_problem(data, sigma, side, prior), args.alpha)
+        with steps("the diagnosis", fit_why(2 * measured, 4)):
+            d = diagnose(pe.procedure_problem(data, sigma, side, prior), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     for choice in choices.values():
@@ -196,8 +245,8 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
                     + ", ".join(f"χ² {o} {v:.4g}" for o, v in c.chi2.items()) + "; "
                     + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"
                     for k, c in choices.items())
-    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data), extra,
-                             preface)
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data), steps,
+                             extra, preface)
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:
@@ -426,6 +475,19 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="what a gyro row holds (point)")
     basic(p)
     p.set_defaults(func=_cmd_diagnose_stabilization)
+
+    p = dsub.add_parser("camera", help="camera calibration from a planar target in several "
+                        "views: pinhole against distortion, skew, aspect ratio, bad corners")
+    p.add_argument("model", help="CSV of the target's points: id, X, Y, unit (m, cm, mm, in)")
+    p.add_argument("views", help="CSV of the observed image points: view, id, u, v [px]")
+    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
+                   help="standard deviation of each image coordinate of a corner [px]")
+    p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json, "
+                   "residuals.csv and plots (residuals against radius and image position, gap)")
+    p.add_argument("--emit-errors", metavar="FILE.toml", help="write the [errors] pixel entry "
+                   "of a ground study (for montecarlo size|run --errors)")
+    basic(p)
+    p.set_defaults(func=_cmd_diagnose_camera)
 
     syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
     ssub = syn.add_subparsers(dest="synth_command", required=True, parser_class=Parser)

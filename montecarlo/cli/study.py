@@ -8,6 +8,7 @@ from pathlib import Path
 
 from montecarlo.cli.common import (
     add_json_option,
+    add_max_points_option,
     add_n_jobs_option,
     check_json_option,
     emit_json,
@@ -24,24 +25,42 @@ FORMATS = ("png", "svg", "pdf")
 def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.engine.checkpoints import Checkpoints
     from montecarlo.engine.runner import (
+        DEFAULT_MAX_TRIALS,
         RunOptions,
         checked_options,
         run_study,
         run_until_decided,
     )
-    from montecarlo.io.files import OutputDir
+    from montecarlo.io.files import RESULTS_ROOT, OutputDir
     from montecarlo.systems import load_study
 
-    study = load_study(args.study, trials=args.trials, seed=args.seed)
-    out = Path(args.out) if args.out else Path("results") / study.header.name
+    if args.errors:
+        from montecarlo.engine.study import merge_errors_file, read_study_file
+        from montecarlo.systems import study_from_dict
+
+        study = study_from_dict(merge_errors_file(read_study_file(args.study), args.errors),
+                                args.study, trials=args.trials, seed=args.seed,
+                                max_points=args.max_points)
+    else:
+        study = load_study(args.study, trials=args.trials, seed=args.seed,
+                           max_points=args.max_points)
+    out = Path(args.out) if args.out else RESULTS_ROOT / study.header.name
     options = RunOptions(n_jobs=args.n_jobs, backend=args.backend, scheduler=args.scheduler,
                          chunk_size=args.chunk_size, progress=not quiet(args),
                          checkpoint_dir=out.parent / ".checkpoints", reference=args.reference)
     checked_options(study, options)  # before any directory is made
+    most = max(gp.trials for gp in study.points)
+    if args.max_trials is not None and not args.until_decided:
+        raise InputError("--max-trials: only with --until-decided")
+    max_trials = DEFAULT_MAX_TRIALS if args.max_trials is None else args.max_trials
     if args.until_decided and study.spec is None:
         raise InputError(f"{args.study}: spec: --until-decided needs a [spec] table to decide")
-    with OutputDir(out, "run", {"study": study.header.name}) as staging:
-        result = run_until_decided(study, options, args.max_trials) if args.until_decided \
+    if args.until_decided and max_trials < most:
+        raise InputError(f"--max-trials: {max_trials:,} is below the study's {most:,} trials "
+                         "per grid point; give at least that many (or fewer --trials)")
+    target = OutputDir(out, "run", {"study": study.header.name}, inputs=(Path(args.study),))
+    with target as staging:
+        result = run_until_decided(study, options, max_trials) if args.until_decided \
             else run_study(study, options)
         from montecarlo.output.outputs import write_outputs  # matplotlib: only for results
 
@@ -110,7 +129,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from montecarlo.tools.bench import format_bench, run_bench
 
     check_json_option(args)
-    result = run_bench(quick=args.quick, repeats=args.repeats)
+    result = run_bench(quick=not args.full, repeats=args.repeats)
     if not emit_json(args, result):
         print(format_bench(result))
     return 0
@@ -119,6 +138,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def add_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a study file and write results/<study>/")
     p.add_argument("study", help="study definition (TOML), e.g. studies/table1.toml")
+    p.add_argument("--errors", metavar="FILE.toml", help="update the study's [errors] table "
+                   "from this file (e.g. written by diagnose camera --emit-errors)")
     add_n_jobs_option(p)
     p.add_argument("--backend", choices=("loky", "dask"), default="loky",
                    help="loky: local processes; dask: a dask.distributed cluster")
@@ -133,8 +154,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--until-decided", action="store_true",
                    help="double the trials of grid points whose spec verdict is undecided "
                    "until it is decided or --max-trials is reached")
-    p.add_argument("--max-trials", type=positive_int, default=1_048_576,
-                   help="most trials per grid point with --until-decided (default 1,048,576)")
+    p.add_argument("--max-trials", type=positive_int,
+                   help="most trials per grid point with --until-decided (default 1,048,576; "
+                   "not below the study's trials)")
+    add_max_points_option(p)
     p.add_argument("--format", choices=FORMATS, default="png", help="plot file format")
     p.set_defaults(func=_cmd_run)
 
@@ -169,6 +192,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("bench", help="trials per second of the reference and fast ground paths")
     add_json_option(p, "every figure")
-    p.add_argument("--quick", action="store_true", help="small sizes (seconds, for tests)")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--quick", action="store_true", help="small sizes, under 30 s on two "
+                      "quiet cores (the default; what `make bench` runs)")
+    size.add_argument("--full", action="store_true", help="the full sizes: runner scaling up "
+                      "to 10^8 trials, memory at 10^8, cold-cache compile time (minutes)")
     p.add_argument("--repeats", type=positive_int, default=5, help="timed runs per figure (5)")
     p.set_defaults(func=_cmd_bench)

@@ -268,6 +268,8 @@ class BudgetResult:
     evaluations: int
     seed: int
     trials: int
+    problem: dict[str, Any] | None = None
+    """The SALib problem of the Sobol analysis (names, groups, dists, bounds)."""
 
 
 def budget(base: Mapping[str, Any], requirement: Requirement, relation: str,
@@ -329,4 +331,4 @@ def budget(base: Mapping[str, Any], requirement: Requirement, relation: str,
     total = stats.iloc[0].copy()
     evaluations = samples * (len(sources) + 2)
     return BudgetResult(relation, req, point, metric.unit, table, total, samples, evaluations,
-                        seed, trials)
+                        seed, trials, model.salib_problem())

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from matplotlib.figure import Figure
 
 from montecarlo.design.budget import SOURCE_LABELS, SOURCE_UNITS, BudgetResult
@@ -146,3 +147,32 @@ def write_budget(results: Sequence[BudgetResult], out_dir: Path) -> list[Path]:
         written.append(out_dir / name)
     written.append(save_figure(budget_figure(results), out_dir / "budget.png", dpi=90))
     return written
+
+
+def write_html_report(results: Sequence[BudgetResult], out_dir: Path) -> Path:
+    """``report.html`` beside ``report.md``: a verdict table first, the budget plot inline as
+    SVG with its caption."""
+    from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
+
+    req = results[0].requirement
+    unit = results[0].unit
+    verdicts = pd.DataFrame({
+        "pixel relation": [r.relation for r in results],
+        f"{req.statistic} [{unit}]": [r.total["value"] for r in results],
+        "lo": [r.total["lo"] for r in results], "hi": [r.total["hi"] for r in results],
+        "limit": [req.limit for _ in results],
+        "verdict": [r.total["verdict"] for r in results]})
+    md = render_budget_report(results)
+    title, _, rest = md.partition("\n")
+    md = "\n".join([title, "", "## Verdict of the design", "", markdown_table(verdicts), "",
+                    rest])
+    relations = ", ".join(r.relation for r in results)
+    caption = (f"Top: first-order S1 and total-order ST Sobol indices of each error source's "
+               f"share of Var(`{req.metric}`) (unitless), {req.confidence:.0%} bootstrap "
+               f"intervals. Bottom: each source's allocation of the limit {req.limit:g} {unit} "
+               f"beside the {req.statistic} of `{req.metric}` ({req.variant} solver) [{unit}] "
+               f"that the source produces alone, with its {req.confidence:.0%} order-statistic "
+               f"interval. Pixel relation between targets A and B: {relations} (one column "
+               "each).")
+    return write_html(out_dir, {"budget.png": HtmlFigure(figure_svg(budget_figure(results)),
+                                                         caption)}, "Error budget", md)

@@ -10,7 +10,9 @@ an upper bound of the p-quantile with confidence c when ``P(B >= k) >= c``, B ~ 
 In metric units the width depends on the distribution, so a pilot run measures it: an
 interval's half-width shrinks as 1 / sqrt(n), so ``n = n0 (h0 / h)^2`` trials give half-width h,
 and a verdict is decided once the half-width is below the distance from the statistic to the
-limit. These are estimates from the pilot, not guarantees; ``run --until-decided`` checks.
+limit. The same holds for a superquantile (``cvarNN``), whose interval is asymptotically normal
+(:mod:`montecarlo.engine.superquantile`). These are estimates from the pilot, not guarantees;
+``run --until-decided`` checks.
 """
 
 from __future__ import annotations
@@ -19,12 +21,20 @@ import math
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 from scipy.special import bdtr
 
 from montecarlo.engine.aggregate import order_statistic_ranks
 from montecarlo.engine.runner import StudyResult
+from montecarlo.engine.superquantile import cvar_level
+from montecarlo.errors import InputError
 
 PERCENTILES = {"p50": 0.50, "p90": 0.90, "p95": 0.95, "p99": 0.99}
+
+
+def has_interval(statistic: str) -> bool:
+    """True for the statistics with a confidence interval: percentiles and ``cvarNN``."""
+    return statistic in PERCENTILES or cvar_level(statistic) is not None
 
 
 def order_statistic_trials(k: int, p: float, confidence: float) -> int:
@@ -72,6 +82,43 @@ def quantile_level_trials(p: float, half_width: float, confidence: float) -> int
     return hi
 
 
+def interval_trials(p: float, confidence: float) -> int:
+    """Fewest trials whose distribution-free two-sided interval of the p-quantile is bounded
+    at both ends (ranks 1 <= r and s <= n, :func:`order_statistic_ranks`).
+
+    The upper end needs ``P(B <= n - 1) >= 1 - (1 - c)/2`` for B ~ Binomial(n, p), i.e.
+    ``1 - p^n >= 1 - (1 - c)/2``, so ``n >= ln((1 - c)/2) / ln(p)``; for p = 0.99, c = 0.95
+    that is ln(0.025)/ln(0.99) = 367.0, so 368 trials (the lower end, by symmetry, needs
+    ``n >= ln((1 - c)/2) / ln(1 - p)``, which is smaller for p >= 0.5).
+    """
+    def bounded(n: int) -> bool:
+        _, r, s = order_statistic_ranks(n, p, confidence)
+        return r >= 1 and s <= n
+
+    hi = 2
+    while not bounded(hi):
+        hi *= 2
+    lo = hi // 2
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if bounded(mid) else (mid, hi)
+    return hi
+
+
+def trials_to_decide(n0: ArrayLike, half: ArrayLike, distance: ArrayLike) -> np.ndarray:
+    """Trials estimated to decide a verdict: the interval's half-width shrinks as 1/sqrt(n),
+    so ``n = ceil(n0 (h0 / d)^2)`` trials bring the pilot's half-width ``h0`` (from ``n0``
+    trials) down to the distance ``d`` from the statistic to the limit. Halving ``d``
+    quadruples n; ``d = 0`` needs infinitely many (returned as inf).
+
+    Example: a pilot of 1000 trials with half-width 0.2 at distance 0.1 needs
+    1000 (0.2/0.1)^2 = 4000 trials; at distance 0.05, 16000.
+    """
+    n0, half, distance = (np.asarray(x, float) for x in (n0, half, distance))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(distance > 0, np.ceil(n0 * (half / distance) ** 2), np.inf)
+
+
 def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None = None
                ) -> pd.DataFrame:
     """Per grid point and variant of the spec's metric (or the plotted one): the pilot's
@@ -80,7 +127,7 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     study = result.study
     spec = study.spec
     metric = spec.metric if spec else study.metrics[0][1].name
-    stat = spec.statistic if spec and spec.statistic in PERCENTILES else "p95"
+    stat = spec.statistic if spec and has_interval(spec.statistic) else "p95"
     rows = summary[summary["metric"] == metric]
     if spec and spec.variant:
         rows = rows[rows["variant"] == spec.variant]
@@ -91,13 +138,21 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     half = np.maximum(value - lo, hi - value)
     out[stat], out[f"{stat}_lo"], out[f"{stat}_hi"] = value, lo, hi
     sampled = (rows["sampling"] != "enumerated").to_numpy()
-    if spec is not None and spec.statistic in PERCENTILES:
-        distance = np.abs(value - spec.limit)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            need = np.where(distance > 0, np.ceil(n0 * (half / distance) ** 2), np.inf)
+    unbounded = sampled & np.isnan(half) & ~np.isnan(value)
+    if unbounded.any():
+        level = PERCENTILES.get(stat) or cvar_level(stat)
+        needed = interval_trials(level, study.header.confidence)
+        raise InputError(f"plan: a pilot of {int(n0[unbounded].min()):,} trials per grid point "
+                         f"cannot bound the {stat} at {study.header.confidence:.0%} confidence "
+                         f"(its interval needs at least {needed:,} trials); give --trials "
+                         f"{needed:,} or more")
+    if spec is not None and has_interval(spec.statistic):
+        need = trials_to_decide(n0, half, np.abs(value - spec.limit))
         decided = (rows["verdict"] != "undecided").to_numpy()
         out["verdict"] = rows["verdict"].to_numpy()
-        out["trials_to_decide"] = np.where(decided | ~sampled, n0, need).astype(np.int64)
+        need = np.where(decided | ~sampled, n0, need)
+        out["trials_to_decide"] = pd.array(
+            [int(v) if np.isfinite(v) else pd.NA for v in need], dtype="Int64")
     if width is not None:
         out[f"trials_for_width_{width:g}"] = np.where(
             sampled, np.ceil(n0 * (2.0 * half / width) ** 2), n0).astype(np.int64)

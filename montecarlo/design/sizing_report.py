@@ -249,3 +249,19 @@ def write_outputs(result: SizingResult, out_dir: Path) -> list[Path]:
     written.append(save_figure(frontier_figure(result), out_dir / "frontier.png", dpi=90))
     put("report.md", render_report(result).encode())
     return written
+
+
+def write_html_report(result: SizingResult, out_dir: Path) -> Path:
+    """``report.html`` beside ``report.md``, the frontier plot inline as SVG with its caption."""
+    from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
+
+    req = result.problem.requirement
+    relations = ", ".join(result.relations)
+    caption = (f"{req.statistic} of `{req.metric}` ({req.variant} solver) [{result.unit}]: "
+               f"top, each grid design's verdict ({req.confidence:.0%} order-statistic "
+               f"interval of {req.statistic} against the limit {req.limit:g} {result.unit}) on "
+               "a slice through the answer, with the boundary of 'meets'; bottom, the "
+               "Pareto-minimal corners, each knob's position in its bounds (log, unitless). "
+               f"Pixel relation between targets A and B: {relations} (one column each).")
+    return write_html(out_dir, {"frontier.png": HtmlFigure(figure_svg(frontier_figure(result)),
+                                                           caption)}, "Sizing")

@@ -198,8 +198,11 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
     Q = _orthonormal(A)
     r = fit.residual
     values = fit.params
+    unavailable = {**problem.unavailable, **{
+        c: f"needs {need} in the model first" for c, need in problem.requires.items()
+        if need not in fit.effects and c not in problem.unavailable}}
     pending = [c for c in problem.candidates
-               if c.name not in fit.effects and c.name not in problem.unavailable]
+               if c.name not in fit.effects and c.name not in unavailable]
     all_params = [p for c in pending for p in c.parameters]
     G_all = jacobian(problem, values, all_params) if all_params else np.zeros((r.size, 0))
 
@@ -210,8 +213,8 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         if c.name in fit.effects:
             tests[c.name] = CandidateTest(c.name, "in_model", reason="already in the model")
             continue
-        if c.name in problem.unavailable:
-            tests[c.name] = CandidateTest(c.name, "unavailable", reason=problem.unavailable[c.name])
+        if c.name in unavailable:
+            tests[c.name] = CandidateTest(c.name, "unavailable", reason=unavailable[c.name])
             continue
         G = G_all[:, offset:offset + len(c.parameters)]
         offset += len(c.parameters)

@@ -71,6 +71,9 @@ class Problem:
         readings); empty: no data snooping.
     separating_data : pair of candidate names -> the extra data that would tell them apart
         (for reports of confounded groups; pairs not listed get a generic text).
+    requires : candidate name -> the candidate that must be in the model before it is tested
+        (a hierarchy such as radial distortion's k1, then k2, then k3); until then it is
+        reported ``unavailable``.
     """
 
     system: str
@@ -81,6 +84,7 @@ class Problem:
     unavailable: Mapping[str, str] = field(default_factory=dict)
     observations: tuple[tuple[str, int, tuple[int, ...]], ...] = ()
     separating_data: Mapping[frozenset[str], str] = field(default_factory=dict)
+    requires: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = [p for e in (self.base, *self.candidates) for p in e.parameters]
@@ -138,7 +142,7 @@ def with_outliers(problem: Problem) -> Problem:
 
     return Problem(problem.system, problem.base, (*problem.candidates, *effects), residuals,
                    problem.start, problem.unavailable, problem.observations,
-                   problem.separating_data)
+                   problem.separating_data, problem.requires)
 
 
 def is_outlier(name: str) -> bool:

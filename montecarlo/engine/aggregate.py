@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from montecarlo.engine.superquantile import CVAR_DEFAULT, cvar_level, superquantile
+
 if TYPE_CHECKING:  # pandas and scipy are imported only where summaries are made
     import pandas as pd
 
@@ -49,7 +51,7 @@ ZERO_BIN = N_MAG + 1
 PERCENTILES = (0.50, 0.90, 0.95, 0.99)
 PERCENTILE_TAGS = tuple(f"p{round(100 * p)}" for p in PERCENTILES)
 VALUE_COLUMNS = ["mean", "std", *(f"{t}{e}" for t in PERCENTILE_TAGS for e in ("", "_lo", "_hi")),
-                 "max"]
+                 *(f"{CVAR_DEFAULT}{e}" for e in ("", "_lo", "_hi")), "max"]
 """Summary columns that carry values in the metric's unit (the rest are counts and labels)."""
 SPEC_COLUMNS = ["spec_value", "spec_lo", "spec_hi"]
 """Summary columns of a spec's statistic over all trials, in the metric's unit."""
@@ -282,6 +284,17 @@ class MetricStats:
             out.append((est, lo, hi))
         return out
 
+    def superquantile(self, level: float, of_abs: bool, confidence: float
+                      ) -> tuple[float, float, float]:
+        """(estimate, lower, upper) of the mean of the worst ``1 - level`` of the values (or
+        magnitudes); see :mod:`.superquantile`."""
+        if of_abs:
+            counts, lower, upper = abs_histogram(self.hist), ABS_LOWER, ABS_UPPER
+        else:
+            counts, lower, upper = self.hist, SIGNED_LOWER, SIGNED_UPPER
+        lo_val, hi_val = self.value_range(of_abs)
+        return superquantile(counts, lower, upper, lo_val, hi_val, level, confidence)
+
     def coarse_histogram(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Magnitude histogram at 32 bins per octave: occupied (lower, upper, counts)."""
         a = abs_histogram(self.hist)
@@ -437,6 +450,14 @@ class PointStats:
                 if not sampled:
                     lo = hi = math.nan
                 row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
+            levels = [CVAR_DEFAULT]
+            if spec is not None and cvar_level(spec.statistic) and spec.applies(variant, metric):
+                levels = list(dict.fromkeys([CVAR_DEFAULT, spec.statistic]))
+            for tag in levels:
+                est, lo, hi = m.superquantile(cvar_level(tag) or 0.95, of_abs, confidence)
+                if not sampled:
+                    lo = hi = math.nan
+                row.update({tag: est, f"{tag}_lo": lo, f"{tag}_hi": hi})
             row["max"] = m.value_range(of_abs)[1] if count else math.nan
             if spec is not None and spec.applies(variant, metric):
                 row.update(self._judge(m, row, spec, of_abs, confidence, sampled))
@@ -451,6 +472,12 @@ class PointStats:
         if stat.startswith("p"):
             value, lo, hi = m.quantile(int(stat[1:]) / 100.0, of_abs, confidence, censored)
             if not sampled:  # every case enumerated: the statistic is exact
+                lo = hi = value
+        elif (level := cvar_level(stat)) is not None:
+            # a trial without a value is +inf: any share of them makes the tail mean infinite
+            value, lo, hi = (math.inf,) * 3 if censored else \
+                m.superquantile(level, of_abs, confidence)
+            if not sampled:
                 lo = hi = value
         else:  # mean, std, max: no interval; any trial without a value fails the spec
             value = math.inf if censored else row[stat]

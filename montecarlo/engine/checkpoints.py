@@ -4,6 +4,12 @@ Each finished grid point is pickled, written atomically, under ``<root>/<name>-<
 covers everything that changes the numbers: the study (its hash), the package's source code
 (a fingerprint of every module) and the options that select an implementation (``reference``).
 A rerun after any of them changed starts afresh instead of mixing results.
+
+Each checkpoint directory holds its key (``key.json``). After a successful run
+(:meth:`Checkpoints.remove`) the run's own checkpoints are deleted, and so are the stale ones of
+the same study (same name and study hash) left by other source versions (another code
+fingerprint, package version or checkpoint format), which no rerun could resume from; other
+studies' checkpoints are left alone.
 """
 
 from __future__ import annotations
@@ -22,6 +28,12 @@ from montecarlo.engine.study import Study
 from montecarlo.io.files import atomic_write_bytes
 
 CHECKPOINT_FORMAT = 2
+
+KEY_FILE = "key.json"
+"""The key of a checkpoint directory, written beside its points."""
+
+SOURCE_KEYS = ("code", "version", "format")
+"""The parts of a key that name a source version (the rest names the study and options)."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -58,10 +70,31 @@ class Checkpoints:
 
     def save(self, point: int, result: PointResult, trials: dict) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
+        if not (self.dir / KEY_FILE).exists():
+            atomic_write_bytes(self.dir / KEY_FILE, json.dumps(self.key, sort_keys=True).encode())
         atomic_write_bytes(self._file(point), pickle.dumps((result, trials)))
 
+    def stale(self) -> list[Path]:
+        """Checkpoint directories of this study (same name and study hash) saved by another
+        source version (code fingerprint, package version or format): never resumable."""
+        name = self.dir.name.rpartition("-")[0]
+        found = []
+        for other in sorted(self.dir.parent.glob(f"{name}-*")):
+            if other == self.dir or other.name.rpartition("-")[0] != name:
+                continue
+            try:
+                key = json.loads((other / KEY_FILE).read_text())
+            except (OSError, ValueError):
+                continue  # not ours to judge: no readable key
+            if isinstance(key, dict) and key.get("study") == self.key["study"] and \
+                    any(key.get(k) != self.key[k] for k in SOURCE_KEYS):
+                found.append(other)
+        return found
+
     def remove(self) -> None:
-        """Delete this study's checkpoints (and the checkpoint root if it is left empty)."""
-        shutil.rmtree(self.dir, ignore_errors=True)
+        """Delete this run's checkpoints and this study's stale ones (:meth:`stale`), and the
+        checkpoint root if it is left empty."""
+        for d in [self.dir, *self.stale()]:
+            shutil.rmtree(d, ignore_errors=True)
         with contextlib.suppress(OSError):
             self.dir.parent.rmdir()

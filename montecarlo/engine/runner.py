@@ -39,7 +39,9 @@ from montecarlo.engine.aggregate import (
     SpecCheck,
 )
 from montecarlo.engine.checkpoints import Checkpoints
+from montecarlo.engine.nominal import nominal_values
 from montecarlo.engine.study import Study
+from montecarlo.engine.superquantile import is_cvar_column
 from montecarlo.engine.tasks import PointTask, exit_with_parent, run_task
 from montecarlo.errors import InputError, RunInterrupted
 
@@ -76,6 +78,16 @@ class StudyResult:
     """Grid points taken from checkpoints (``points``) and where (``from``, ``key``)."""
     kernel: str = "reference"
     """``"fast"`` if the system's compiled kernel computed the trials, else ``"reference"``."""
+    nominal: dict[int, dict[tuple[str, str], float]] | None = None
+    """Per grid point, each (variant, metric) in the nominal case [SI units, radians]
+    (:mod:`.nominal`); computed on first use."""
+
+    def nominal_values(self) -> dict[int, dict[tuple[str, str], float]]:
+        """The nominal case of every grid point (one trial each, every error at its centre)."""
+        if self.nominal is None:
+            self.nominal = {gp.index: nominal_values(self.study.system, gp.prepared)
+                            for gp in self.study.points}
+        return self.nominal
 
     def _sweep_value(self, key: str, value: Any) -> Any:
         """Sweep values as they go in a column: text if the key mixes numbers and text."""
@@ -85,10 +97,15 @@ class StudyResult:
     def to_frame(self) -> pd.DataFrame:
         """Summary: one row per (grid point, variant, metric), values in display units."""
         frames = []
+        nominal = self.nominal_values()
         for gp, pr in zip(self.study.points, self.points, strict=True):
             df = pr.summary.copy()
+            df["nominal"] = [nominal[gp.index].get((v, m), math.nan)
+                             for v, m in zip(df["variant"], df["metric"], strict=True)]
             scale = df["metric"].map({m.name: m.scale for _, m in self.study.metrics})
-            values = [c for c in (*VALUE_COLUMNS, *SPEC_COLUMNS) if c in df.columns]
+            values = [c for c in df.columns
+                      if c in VALUE_COLUMNS or c in SPEC_COLUMNS or is_cvar_column(c)
+                      or c == "nominal"]
             df[values] = df[values].mul(scale, axis=0)
             df.insert(0, "point", gp.index)
             for i, key in enumerate(self.study.sweep_keys):
@@ -392,7 +409,12 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     return StudyResult(study, points, trials, origin, "reference" if reference else "fast")
 
 
-def run_until_decided(study: Study, options: RunOptions, max_trials: int) -> StudyResult:
+DEFAULT_MAX_TRIALS = 1_048_576
+"""Default cap on the trials per grid point of :func:`run_until_decided`."""
+
+
+def run_until_decided(study: Study, options: RunOptions,
+                      max_trials: int = DEFAULT_MAX_TRIALS) -> StudyResult:
     """Run, then double the trials of every sampled grid point whose spec verdict is
     ``undecided`` and run it again, until every verdict is decided or ``max_trials`` is reached.
 
@@ -401,14 +423,24 @@ def run_until_decided(study: Study, options: RunOptions, max_trials: int) -> Stu
     at most twice that of the last round). Decided points keep their result. Checkpoints are
     not used.
 
+    Every round takes the path a direct run of ``study`` takes (:func:`uses_reference`,
+    decided once, before the first round), whatever ``max_trials`` is: each point's result is
+    bit for bit that of a direct run of its final trials on that path
+    (``run --trials N [--reference]``; the result's ``kernel`` says which).
+
     Raises
     ------
     InputError
-        The study has no ``[spec]`` to decide.
+        The study has no ``[spec]`` to decide, or ``max_trials`` is below its trials.
     """
     if study.spec is None:
         raise InputError(f"{study.path}: spec: --until-decided needs a [spec] table to decide")
-    options = replace(options, checkpoint_dir=None)
+    most = max(gp.trials for gp in study.points)
+    if max_trials < most:
+        raise InputError(f"--max-trials: {max_trials:,} is below the study's {most:,} trials "
+                         "per grid point; give at least that many (or fewer --trials)")
+    options = replace(options, checkpoint_dir=None,
+                      reference=uses_reference(study, checked_options(study, options)))
     result = run_study(study, options)
     trials = dict(result.trials)
     while True:

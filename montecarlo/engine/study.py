@@ -11,6 +11,7 @@ Layout of a study file::
 
     [spec]                       # optional requirement drawn on plots and checked in reports
     metric = "rotation_angle"; variant = "normalised"; statistic = "p95"; limit = 3.0
+    # statistic: p50/p90/p95/p99, mean, std, max, or cvar95 (mean of the worst 5 %; any cvarNN)
 
     ... the system's own sections (e.g. [sensor], [geometry], [errors] for "ground") ...
 
@@ -33,13 +34,14 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, field_validator
 
 from montecarlo.engine.schema import Strict
 from montecarlo.engine.system import Metric, System
@@ -47,6 +49,15 @@ from montecarlo.errors import InputError
 
 MAX_TRIALS = 10**13
 """Most trials per grid point (years of computing at today's rates)."""
+
+MAX_POINTS = 10_000
+"""Default limit on the grid points of a study (``--max-points`` raises it)."""
+
+BYTES_PER_POINT = 150_000
+"""Memory a grid point takes while a study is expanded and run [bytes]: about 11 kB for its
+validated configuration and 66 kB for its results (summary rows, histograms), peaking near
+134 kB while the summary is built (measured with ``tracemalloc`` on ground studies of 2000 and
+300 points), rounded up."""
 
 
 class StudyHeader(Strict):
@@ -62,13 +73,25 @@ class StudyHeader(Strict):
     per_trial: bool = False
     confidence: float = Field(default=0.95, gt=0.0, lt=1.0)
 
+    @field_validator("name")
+    @classmethod
+    def _not_a_directory_name(cls, name: str) -> str:
+        """'.' and '..' (any name of dots only) are directories: results/<name> would be the
+        results root or its parent."""
+        if not name.strip("."):
+            raise ValueError("must not be only dots ('.' and '..' name directories, and "
+                             "results go to results/<name>/)")
+        return name
+
 
 class Spec(Strict):
     """The optional ``[spec]`` table: a requirement in the metric's display unit."""
 
     metric: str
     variant: str | None = None
-    statistic: Literal["mean", "std", "p50", "p90", "p95", "p99", "max"] = "p95"
+    statistic: str = Field(default="p95",
+                           pattern=r"^(mean|std|p50|p90|p95|p99|max|cvar[1-9][0-9]?)$")
+    """A percentile, mean, std, max, or ``cvarNN``: the mean of the worst (100 - NN) %."""
     limit: float = Field(gt=0)
 
 
@@ -218,6 +241,51 @@ def _expand(groups: list[tuple[str, dict[str, list[Any]]]]) -> list[dict[str, An
 SWEEP_MODES = ("product", "zip", "one_at_a_time")
 
 
+def grid_size(groups: list[tuple[str, dict[str, list[Any]]]]) -> int:
+    """Grid points the sweep groups expand to, counted without expanding them: a product
+    group gives the product of its list lengths, a zip group their common length, a
+    one_at_a_time group one point per value plus the base point; groups multiply."""
+    n = 1
+    for mode, group in groups:
+        lengths = [len(v) for v in group.values()]
+        n *= 1 + sum(lengths) if mode == "one_at_a_time" else \
+            lengths[0] if mode == "zip" else math.prod(lengths)
+    return n
+
+
+def _physical_memory() -> int | None:
+    """The machine's memory [bytes], or None where it cannot be read."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_grid_size(path: Path, groups: list[tuple[str, dict[str, list[Any]]]],
+                    max_points: int) -> int:
+    """The grid size, or one line (before anything is expanded) if it exceeds ``max_points``
+    or its memory estimate (:data:`BYTES_PER_POINT` each) exceeds the machine's memory."""
+    n = grid_size(groups)
+    need = n * BYTES_PER_POINT
+    memory = _physical_memory()
+    if n > max_points:
+        raise InputError(f"{path}: sweep: {n:,} grid points (about {_bytes_text(need)} of "
+                         f"memory) exceed the limit of {max_points:,}; sweep fewer values or "
+                         "raise the limit with --max-points")
+    if memory is not None and need > memory:
+        raise InputError(f"{path}: sweep: {n:,} grid points need about {_bytes_text(need)} of "
+                         f"memory, more than this machine's {_bytes_text(memory)}; sweep fewer "
+                         "values")
+    return n
+
+
+def _bytes_text(n: float) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
 def _lookup(path: Path, raw: dict[str, Any], key: str) -> Any:
     """The value at a dotted key of a study dict (the base of a one_at_a_time sweep)."""
     node: Any = raw
@@ -245,11 +313,50 @@ Systems = Mapping[str, Callable[[], System]]
 """System name -> factory of the system (see :data:`montecarlo.systems.REGISTRY`)."""
 
 
+def _check_swept_base_values(path: Path, system: System, raw: dict[str, Any],
+                             first: dict[str, Any], sweep_keys: tuple[str, ...]) -> None:
+    """Refuse an invalid base value of a swept key (e.g. a negative ``geometry.L_m`` that the
+    sweep replaces), as a non-finite one is refused: the file's values are checked whether or
+    not a sweep replaces them.
+
+    The base values of the swept keys are validated together with the first grid point's
+    values of the other keys; only an error at a swept key is reported (the grid points
+    themselves are checked afterwards).
+    """
+    given = []
+    for key in sweep_keys:
+        try:
+            _lookup(path, raw, key)
+        except InputError:
+            continue
+        given.append(key)
+    if not given:
+        return
+    probe = copy.deepcopy(raw)
+    for key, value in first.items():
+        if key not in given:
+            _apply(path, probe, key, value)
+    try:
+        system.config_model.model_validate(probe)
+    except ValidationError as err:
+        for e in err.errors():
+            loc = ".".join(str(x) for x in e["loc"])
+            if any(loc == k or loc.startswith(k + ".") for k in given):
+                value = _short(e.get("input"))
+                raise InputError(f"{path}: {loc}: {e['msg']} (got {value}) [the base value, "
+                                 "which the sweep replaces: give a valid one or remove it]"
+                                 ) from None
+
+
 def read_study_file(path: str | Path) -> dict[str, Any]:
     """The parsed TOML of a study file; every problem is one line naming the file."""
     path = Path(path)
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
+        data = path.read_bytes()
+        if data.startswith(b"\xef\xbb\xbf"):
+            raise InputError(f"{path}: starts with a byte-order mark (BOM, bytes EF BB BF), "
+                             "which TOML does not allow; save it as UTF-8 without BOM")
+        return tomllib.loads(data.decode("utf-8"))
     except FileNotFoundError:
         raise InputError(f"{path}: no such study file") from None
     except IsADirectoryError:
@@ -260,17 +367,45 @@ def read_study_file(path: str | Path) -> dict[str, Any]:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
 
 
+def merge_errors_file(raw: dict[str, Any], path: str | Path) -> dict[str, Any]:
+    """The study ``raw`` with its ``[errors]`` table updated, key by key, from the TOML file at
+    ``path`` (e.g. the pixel error a camera calibration left, ``diagnose camera
+    --emit-errors``). The file may hold an ``[errors]`` table and nothing else.
+
+    Raises
+    ------
+    InputError
+        The file is missing or not TOML, or holds anything but an ``[errors]`` table.
+    """
+    extra = read_study_file(path)
+    if not isinstance(extra.get("errors"), dict) or set(extra) != {"errors"}:
+        other = sorted(set(extra) - {"errors"})
+        raise InputError(f"{path}: an errors file holds one [errors] table"
+                         + (f" and nothing else (got: {', '.join(other)})" if other else
+                            " (none found)"))
+    merged = copy.deepcopy(raw)
+    table = merged.setdefault("errors", {})
+    if not isinstance(table, dict):
+        raise InputError(f"{path}: errors: the study's errors is not a table")
+    table.update(copy.deepcopy(extra["errors"]))
+    return merged
+
+
 def load_study(path: str | Path, systems: Systems, *, trials: int | None = None,
-               seed: int | None = None) -> Study:
+               seed: int | None = None, max_points: int = MAX_POINTS) -> Study:
     """Read, validate and expand a study file; ``trials``/``seed`` override the file's."""
-    return study_from_dict(read_study_file(path), systems, path, trials=trials, seed=seed)
+    return study_from_dict(read_study_file(path), systems, path, trials=trials, seed=seed,
+                           max_points=max_points)
 
 
 def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<study>", *,
-                    trials: int | None = None, seed: int | None = None) -> Study:
+                    trials: int | None = None, seed: int | None = None,
+                    max_points: int = MAX_POINTS) -> Study:
     """Validate and expand a study given as a dict (the parsed TOML); ``path`` labels errors.
 
-    ``systems`` maps the names ``[study] system`` may take to their factories.
+    ``systems`` maps the names ``[study] system`` may take to their factories. A sweep of more
+    than ``max_points`` grid points is refused before it is expanded (:func:`check_grid_size`).
+    A base value that a sweep replaces is checked as strictly as the values that replace it.
     """
     path = Path(path)
     _reject_non_finite(path, raw)
@@ -307,10 +442,15 @@ def study_from_dict(raw: dict[str, Any], systems: Systems, path: str | Path = "<
     repeated = [k for i, k in enumerate(sweep_keys) if k in sweep_keys[:i]]
     if repeated:
         raise InputError(f"{path}: sweep: key {repeated[0]!r} appears in two sweep groups")
+    check_grid_size(path, groups, max_points)
+    expanded = _expand(groups)
+    _check_swept_base_values(path, system, raw, expanded[0],
+                             tuple(k for mode, g in groups if mode != "one_at_a_time"
+                                   for k in g))
 
     points = []
     seen: dict[str, int] = {}
-    for i, overrides in enumerate(_expand(groups)):
+    for i, overrides in enumerate(expanded):
         point_raw = copy.deepcopy(raw)
         for key, value in overrides.items():
             _apply(path, point_raw, key, value)

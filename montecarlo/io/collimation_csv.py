@@ -86,8 +86,9 @@ def read_mirror_csv(path: str | Path, min_mirrors: int = 1, need: str = "",
     Raises
     ------
     InputError
-        Missing column, non-numeric or NaN value, unknown ``set``, a reference row repeated or
-        alone, or too few mirrors; one line naming file, row and column.
+        Missing column, non-numeric or NaN value, unknown ``set``, a mirror repeated in its
+        set, a reference row repeated or alone, or too few mirrors; one line naming file, row
+        and column.
     """
     numeric = [c for c in CSV_COLUMNS if c.endswith("_deg")]
     azimuth, elevation = (-360.0, 360.0), (-90.0, 90.0)
@@ -97,6 +98,12 @@ def read_mirror_csv(path: str | Path, min_mirrors: int = 1, need: str = "",
                                "theodolite_el_deg": elevation, "ins_el_deg": elevation,
                                "ins_roll_deg": (-180.0, 180.0)})
     kinds = list(table["set"])
+    first: dict[tuple[str, str], int] = {}
+    for i, key in enumerate(zip(table["mirror"], kinds, strict=True)):
+        if key in first:
+            raise InputError(f"{path}: row {i + 2}, column 'mirror': {key[0]!r} in set "
+                             f"{key[1]!r} repeats row {first[key]} (each mirror is read once)")
+        first[key] = i + 2
     for kind in REFERENCE_SETS:
         rows = [i + 2 for i, k in enumerate(kinds) if k == kind]
         if len(rows) > 1:

@@ -41,6 +41,13 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
 PROVENANCE = "provenance.json"
 """The file that marks a directory as results this package wrote (see :class:`OutputDir`)."""
 
+FILES_KEY = "files"
+"""The key of ``provenance.json`` that lists what the command wrote: relative path -> size in
+bytes (None for a directory). Anything else found in the directory makes it the user's."""
+
+RESULTS_ROOT = Path("results")
+"""The default root of result directories (``results/<study>/``); never itself a result."""
+
 
 def _pid_alive(pid: int) -> bool:
     try:
@@ -52,37 +59,194 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _real(path: Path) -> Path:
+    """``path`` with every symbolic link and ``..`` resolved (it need not exist)."""
+    return Path(os.path.realpath(path))
+
+
+def written_files(directory: Path) -> dict[str, int | None]:
+    """Every entry below ``directory`` but its ``provenance.json``: relative path -> size in
+    bytes, None for a directory and -1 for a symbolic link (not followed)."""
+    entries: dict[str, int | None] = {}
+    for dirpath, dirnames, filenames in os.walk(directory):
+        for name in sorted(dirnames + filenames):
+            path = Path(dirpath) / name
+            rel = path.relative_to(directory).as_posix()
+            if rel == PROVENANCE:
+                continue
+            if path.is_symlink():
+                entries[rel] = -1
+            elif path.is_dir():
+                entries[rel] = None
+            else:
+                entries[rel] = path.stat().st_size
+    return dict(sorted(entries.items()))
+
+
+def record_written_files(directory: Path) -> None:
+    """Add the list of ``directory``'s entries (:data:`FILES_KEY`) to its ``provenance.json``
+    (nothing if it has none): what the command wrote, checked before the directory is
+    replaced."""
+    marker = directory / PROVENANCE
+    try:
+        record = json.loads(marker.read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(record, dict):
+        record[FILES_KEY] = written_files(directory)
+        atomic_write_bytes(marker, (json.dumps(record, indent=2, default=str) + "\n").encode())
+
+
+def update_written_files(directory: Path, replaced: tuple[str, ...]) -> None:
+    """After a command rewrote the entries ``replaced`` (top-level names) of a result
+    directory, list what they now hold in its ``provenance.json``, keeping the rest of the list
+    (a result without a list keeps none: its files still cannot be told apart)."""
+    marker = directory / PROVENANCE
+    try:
+        record = json.loads(marker.read_text())
+    except (OSError, ValueError):
+        return
+    if not isinstance(record, dict) or not isinstance(record.get(FILES_KEY), dict):
+        return
+    kept = {rel: size for rel, size in record[FILES_KEY].items()
+            if rel.split("/")[0] not in replaced}
+    now = {rel: size for rel, size in written_files(directory).items()
+           if rel.split("/")[0] in replaced}
+    record[FILES_KEY] = dict(sorted({**kept, **now}.items()))
+    atomic_write_bytes(marker, (json.dumps(record, indent=2, default=str) + "\n").encode())
+
+
+def foreign_entries(directory: Path, record: dict[str, Any]) -> list[str] | None:
+    """Entries of a result directory that its command did not write (or that changed size
+    since), sorted; None if ``record`` (its provenance) has no list of written files."""
+    listed = record.get(FILES_KEY)
+    if not isinstance(listed, dict):
+        return None
+    found = written_files(directory)
+    return [rel for rel, size in found.items()
+            if rel not in listed or listed[rel] != size or size == -1]
+
+
+def protected_reason(path: Path, inputs: tuple[Path, ...] = ()) -> str | None:
+    """Why ``path`` may never be replaced by a result directory, or None.
+
+    Refused: the current directory and its parents (``.``, ``..``), the results root
+    :data:`RESULTS_ROOT` and its parents, the home directory, a directory holding one of the
+    ``inputs`` (the study or data file read), and a path that is a symbolic link or leads
+    through one to any of these.
+    """
+    if path.is_symlink():
+        return "is a symbolic link; give the directory itself"
+    real = _real(path)
+    cwd = _real(Path.cwd())
+    if real == cwd or real in cwd.parents:
+        return "is the current directory or one of its parents"
+    results = _real(RESULTS_ROOT)
+    if real == results or real in results.parents:
+        return f"is the results root {str(RESULTS_ROOT)!r} or one of its parents, not a result"
+    if real == _real(Path.home()):
+        return "is the home directory"
+    for source in inputs:
+        if real in _real(source).parents:
+            return f"holds the input {str(source)!r}"
+    return None
+
+
+class OutputLock:
+    """``with OutputLock(path):`` holds the lock file ``.NAME.lock`` beside ``path`` (an output
+    directory), so that a second writer of the same directory is refused instead of replacing
+    the first one's result; the lock file is removed on exit.
+
+    The lock is an ``flock`` on that file: a killed process releases it, and a lock file it
+    leaves behind is taken over by the next writer.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.file = self.path.parent / f".{self.path.name}.lock"
+        self.fd: int | None = None
+
+    def __enter__(self) -> OutputLock:
+        import fcntl
+
+        from montecarlo.errors import InputError
+
+        while True:
+            try:
+                fd = os.open(self.file, os.O_RDWR | os.O_CREAT, with_umask(0o666))
+            except OSError as exc:
+                raise InputError(f"{self.path}: cannot write here ({exc.strerror})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+                os.close(fd)
+                raise InputError(f"{self.path}: another process (pid {holder}) is writing it "
+                                 f"(lock {self.file.name}); wait for it to finish or choose "
+                                 "another output path") from None
+            try:  # the file may have been removed by the holder we waited for: lock anew
+                same = os.fstat(fd).st_ino == os.stat(self.file).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self.fd = fd
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        assert self.fd is not None
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.file)
+        os.close(self.fd)
+        self.fd = None
+
+
 class OutputDir:
     """A results directory written all or nothing, that never replaces what it did not write.
 
-    ``with OutputDir(path, kind) as tmp:`` checks ``path`` first: it may be absent, an empty
-    directory, or an earlier result of the same kind (its ``provenance.json`` has ``kind`` and
-    the items of ``match``); anything else is an :class:`~montecarlo.errors.InputError`,
-    raised before any work is done and touching nothing. The body writes into ``tmp``, a hidden
-    sibling ``.NAME.tmp-<pid>-<random>``; on success it replaces ``path``, on any exception
-    (Ctrl-C included) it is removed. Hidden siblings left by a process that was killed are
-    removed when the next one starts.
+    ``with OutputDir(path, kind) as tmp:`` checks ``path`` first. It may be absent, an empty
+    directory, or wholly an earlier result of the same kind: its ``provenance.json`` has
+    ``kind`` and the items of ``match``, and lists every other entry of the directory with its
+    size (:data:`FILES_KEY`, recorded when the result was written). A file the command did not
+    write makes the directory the user's. The path must not be one :func:`protected_reason`
+    refuses (the current directory or a parent, the results root, a directory holding one of
+    ``inputs``, a symbolic link). Anything else is an :class:`~montecarlo.errors.InputError`,
+    raised before any work is done and touching nothing.
+
+    While the body runs, :class:`OutputLock` holds ``.NAME.lock`` beside ``path``: a second
+    writer of the same directory is refused. The body writes into ``tmp``, a hidden sibling
+    ``.NAME.tmp-<pid>-<random>``; on success the list of written files is added to its
+    ``provenance.json`` and it replaces ``path``; on any exception (Ctrl-C included) it is
+    removed. Hidden siblings left by a process that was killed are removed when the next one
+    starts.
 
     ``previous`` is the existing result (or None), for commands that carry files forward.
     Directories made to hold ``path`` are removed again if the body fails while they are empty.
     """
 
-    def __init__(self, path: str | Path, kind: str, match: dict[str, Any] | None = None):
+    def __init__(self, path: str | Path, kind: str, match: dict[str, Any] | None = None,
+                 inputs: tuple[str | Path, ...] = ()):
         self.path = Path(path)
         self.kind = kind
         self.match = match or {}
+        self.inputs = tuple(Path(p) for p in inputs)
         self.previous: Path | None = None
         self.tmp: Path | None = None
         self.created: list[Path] = []
+        self.lock: OutputLock | None = None
 
     def check(self) -> None:
         """Raise InputError unless the directory may be (re)written; touches nothing."""
         from montecarlo.errors import InputError
 
         p = self.path
+        reason = protected_reason(p, self.inputs)
+        if reason is not None:
+            raise InputError(f"{p}: {reason}; choose another output path")
         if not p.exists():
-            if p.is_symlink():
-                raise InputError(f"{p}: a broken symbolic link; choose another output path")
             return
         if not p.is_dir():
             raise InputError(f"{p}: exists and is not a directory; choose another output path")
@@ -98,6 +262,15 @@ class OutputDir:
             what = " ".join(f"{k}={v}" for k, v in wanted.items())
             raise InputError(f"{p}: exists and is not an earlier result of this command ({what}); "
                              "choose another output path or remove it")
+        foreign = foreign_entries(p, record)
+        if foreign is None:
+            raise InputError(f"{p}: an earlier result without the list of its files (written "
+                             "by an older version), so files added to it cannot be told apart; "
+                             "choose another output path or remove it")
+        if foreign:
+            raise InputError(f"{p}: holds {len(foreign)} file(s) this command did not write "
+                             f"(first {foreign[0]!r}), so it is not wholly an earlier result; "
+                             "choose another output path or move them out")
         self.previous = p
 
     def _remove_stale(self) -> None:
@@ -114,31 +287,53 @@ class OutputDir:
         missing = [d for d in (self.path.parent, *self.path.parent.parents) if not d.exists()]
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.created = missing
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot write here ({exc.strerror})") from None
+        self.created = missing
+        try:
+            self.lock = OutputLock(self.path).__enter__()
+            self.check()  # again, under the lock: another writer may have finished meanwhile
             self._remove_stale()
             self.tmp = Path(tempfile.mkdtemp(dir=self.path.parent,
                                              prefix=f".{self.path.name}.tmp-{os.getpid()}-"))
-        except OSError as exc:
-            raise InputError(f"{self.path}: cannot write here ({exc.strerror})") from None
+        except BaseException as exc:
+            self._release()
+            self._remove_created()
+            if isinstance(exc, OSError):
+                raise InputError(f"{self.path}: cannot write here ({exc.strerror})") from None
+            raise
         self.tmp.chmod(with_umask(0o777))  # mkdtemp makes it private; results are shared
         return self.tmp
 
+    def _release(self) -> None:
+        if self.lock is not None:
+            self.lock.__exit__(None, None, None)
+            self.lock = None
+
+    def _remove_created(self) -> None:
+        for d in self.created:  # innermost first: directories made for this result only
+            with contextlib.suppress(OSError):
+                d.rmdir()
+
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         assert self.tmp is not None
-        if exc_type is not None:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            for d in self.created:  # innermost first: directories made for this result only
-                with contextlib.suppress(OSError):
-                    d.rmdir()
-            return
-        old = None
-        if self.path.exists():
-            old = Path(tempfile.mkdtemp(dir=self.path.parent,
-                                        prefix=f".{self.path.name}.old-{os.getpid()}-"))
-            self.path.rename(old / "results")
-        self.tmp.rename(self.path)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        try:
+            if exc_type is not None:
+                shutil.rmtree(self.tmp, ignore_errors=True)
+                self._release()
+                self._remove_created()
+                return
+            record_written_files(self.tmp)
+            old = None
+            if self.path.exists():
+                old = Path(tempfile.mkdtemp(dir=self.path.parent,
+                                            prefix=f".{self.path.name}.old-{os.getpid()}-"))
+                self.path.rename(old / "results")
+            self.tmp.rename(self.path)
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+        finally:
+            self._release()
 
 
 def writable_file(path: str | Path) -> Path:
@@ -162,12 +357,31 @@ def writable_file(path: str | Path) -> Path:
     return path
 
 
-def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
-    """Render a matplotlib figure to PNG (or the format of the suffix) and write it atomically."""
+FIXED_METADATA = {"png": {}, "svg": {"Date": None}, "pdf": {"CreationDate": None}}
+"""Metadata that would change on every render (the date), left out so that drawing the same
+figure again gives the same bytes."""
+
+SVG_HASHSALT = "montecarlo"
+"""matplotlib's ``svg.hashsalt``: the ids of clip paths and markers in an SVG are hashes salted
+with it (random otherwise)."""
+
+
+def figure_bytes(fig: Any, fmt: str = "png", dpi: int = 110) -> bytes:
+    """A matplotlib figure rendered as ``fmt`` (png, svg, pdf), the same bytes every time: no
+    creation date, fixed SVG ids."""
     import io
 
-    path = Path(path)
+    import matplotlib
+
     buf = io.BytesIO()
-    fig.savefig(buf, format=path.suffix.lstrip(".") or "png", dpi=dpi)
-    atomic_write_bytes(path, buf.getvalue())
+    with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
+        fig.savefig(buf, format=fmt, dpi=dpi, metadata=FIXED_METADATA.get(fmt) or None)
+    return buf.getvalue()
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
+    """Render a matplotlib figure to PNG (or the format of the suffix), the same bytes every
+    time (:func:`figure_bytes`), and write it atomically."""
+    path = Path(path)
+    atomic_write_bytes(path, figure_bytes(fig, path.suffix.lstrip(".") or "png", dpi))
     return path

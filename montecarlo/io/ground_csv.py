@@ -92,8 +92,9 @@ def read_ground_csv(path: str | Path, camera: Camera, min_rows: int = 1, need: s
     Raises
     ------
     InputError
-        Missing column, non-numeric or NaN value, too few rows, a target at the origin, or an
-        image coordinate outside the detector; one line naming file, row and column.
+        Missing column, non-numeric or NaN value, too few rows, a row repeating the target,
+        session and time of an earlier one, a target at the origin, or an image coordinate
+        outside the detector; one line naming file, row and column.
     """
     far = (-FARTHEST, FARTHEST)
     table = read_table(path, ["x_m", "y_m", "z_m", "px", "pz"], optional_numeric=["t_s"],
@@ -116,6 +117,16 @@ def read_ground_csv(path: str | Path, camera: Camera, min_rows: int = 1, need: s
             i = int(bad[0])
             raise InputError(f"{path}: row {i + 2}, column '{column}': {float(values[i])!r} "
                              f"is outside the detector (|{column}| <= {half:g} px)")
+    t_column = table["t_s"].to_numpy(float) if "t_s" in table.columns else [None] * len(table)
+    first: dict[tuple[str, str, float | None], int] = {}
+    for i, key in enumerate(zip(table["target"], session or [""] * len(table), t_column,
+                                strict=True)):
+        if key in first:
+            when = "".join([f" in session {key[1]!r}" if session else "",
+                            f" at t_s = {key[2]:g}" if key[2] is not None else ""])
+            raise InputError(f"{path}: row {i + 2}, column 'target': {key[0]!r}{when} repeats "
+                             f"row {first[key]} (a target is observed once per session and time)")
+        first[key] = i + 2
     positions = table[["x_m", "y_m", "z_m"]].to_numpy(float)
     zero = np.flatnonzero(np.linalg.norm(positions, axis=1) == 0.0)
     if zero.size:

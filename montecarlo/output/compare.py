@@ -97,8 +97,9 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
                          f"({a.name} and {b.name}, or different grids); add "
                          "--allow-different to match their common grid points")
     on = [*[k for k in keys if k in b.sweep_keys], "variant", "metric"]
-    cols = ["unit", "sampling", "count", statistic, "std",
-            *([f"{statistic}_lo", f"{statistic}_hi"] if statistic.startswith("p") else [])]
+    cols = list(dict.fromkeys(["unit", "sampling", "count", statistic, "std",
+                               *([f"{statistic}_lo", f"{statistic}_hi"]
+                                 if statistic.startswith("p") else [])]))
     left = a.summary[["point", *on, *[c for c in cols if c in a.summary]]]
     right = b.summary[[*on, *[c for c in cols if c in b.summary]]]
     rows = left.merge(right, on=on, suffixes=("_a", "_b"))
@@ -113,8 +114,7 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
     exact = same_draws | ((rows["sampling_a"] == "enumerated")
                           & (rows["sampling_b"] == "enumerated")).to_numpy()
     se = np.sqrt(_se(rows, statistic, "a", z) ** 2 + _se(rows, statistic, "b", z) ** 2)
-    m = max(int((~exact).sum()), 1)
-    z_all = float(ndtri(1.0 - (1.0 - confidence) / (2.0 * m)))  # simultaneous over m rows
+    z_all = simultaneous_z(confidence, int((~exact).sum()))
     lo = np.where(exact, diff, diff - z_all * se)
     hi = np.where(exact, diff, diff + z_all * se)
     tolerance = rtol * np.maximum(np.abs(va), np.abs(vb))
@@ -136,9 +136,22 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
     return out.reset_index(drop=True)
 
 
+def simultaneous_z(confidence: float, m: int) -> float:
+    """Half-width of the simultaneous intervals of ``m`` rows in standard errors (Bonferroni):
+    each row's two-sided interval at confidence ``1 - (1 - c) / m``, i.e.
+    ``z = Phi^-1(1 - (1 - c) / (2 m))`` (m = 1 gives the plain 1.95996 at c = 0.95; m < 1 is
+    read as 1)."""
+    m = max(int(m), 1)
+    return float(ndtri(1.0 - (1.0 - confidence) / (2.0 * m)))
+
+
 def _se(rows: pd.DataFrame, statistic: str, side: str, z: float) -> np.ndarray:
     """Standard error of one run's statistic (NaN where none can be given); a percentile's
-    distribution-free interval at the study's confidence is read as +-z standard errors."""
+    distribution-free interval at the study's confidence is read as +-z standard errors.
+
+    ``mean``: s / sqrt(n). ``std``: s / sqrt(2 (n - 1)), the large-sample standard error of a
+    sample standard deviation of normal data (from var(s^2) = 2 sigma^4 / (n - 1) and the delta
+    method, se(s) = se(s^2) / (2 sigma)); for other distributions it is approximate."""
     n = rows[f"count_{side}"].to_numpy(float)
     std = rows[f"std_{side}"].to_numpy(float)
     with np.errstate(divide="ignore", invalid="ignore"):

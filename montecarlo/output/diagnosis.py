@@ -170,3 +170,28 @@ def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
     text += ["![residuals](residuals.png)", "", "![gap](gap.png)", ""]
     atomic_write_bytes(outdir / "report.md", "\n".join(text).encode())
     return [*written, outdir / "diagnosis.json", outdir / "residuals.csv", outdir / "report.md"]
+
+
+def write_html_report(outdir: str | Path, d: Diagnosis, view: SystemView,
+                      mc: Mapping[str, FloatArray] | None = None) -> Path:
+    """``report.html`` beside ``report.md`` (:mod:`montecarlo.output.html_report`): the residual
+    and gap plots (``mc`` as for :func:`write_report`) inline as SVG, with captions."""
+    from montecarlo.output.html_report import HtmlFigure, drawn_svg, write_html
+
+    pixel = ("Pixel relation: not modelled here (measured data, one residual per "
+             "observation).")
+    unit = view.rms_unit
+    figures = {
+        "residuals.png": HtmlFigure(
+            drawn_svg(lambda p: plot_residuals(d, view, p), "residuals.svg"),
+            f"Residuals (measured − model) of every {view.system} observation [{unit}] against "
+            f"each of its axes, base model (top) and adapted model (bottom); statistic: each "
+            f"observation's own residual, no aggregate. {pixel}"),
+        "gap.png": HtmlFigure(
+            drawn_svg(lambda p: plot_gap(d, view, mc, p), "gap.svg"),
+            f"The gap before and after adaptation: reduced chi-square χ²_red (unitless, log "
+            f"scale) with its 99 % band, and the residual RMS [{unit}]"
+            + ("; the Monte Carlo distribution of χ²_red beside the measured value"
+               if mc is not None else "") + f". {pixel}"),
+    }
+    return write_html(outdir, figures, f"Diagnosis: {view.system}")

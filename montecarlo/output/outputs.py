@@ -18,7 +18,18 @@ from typing import Any
 import pandas as pd
 
 from montecarlo.engine.runner import RunOptions, StudyResult
-from montecarlo.io.files import PROVENANCE, atomic_write_bytes
+from montecarlo.errors import InputError
+from montecarlo.io.files import (
+    FILES_KEY,
+    PROVENANCE,
+    OutputLock,
+    atomic_write_bytes,
+    foreign_entries,
+    save_figure,
+    update_written_files,
+)
+from montecarlo.output.captions import figure_caption
+from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
@@ -28,50 +39,94 @@ from montecarlo.output.saved import HISTOGRAMS, histogram_table, load_result
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
                   fmt: str = "png") -> Path:
     """Write summary.csv/.parquet, histograms.parquet, trials.parquet (if kept),
-    provenance.json, plots (in ``fmt``) and report.md."""
+    provenance.json, plots (in ``fmt``), report.md and report.html."""
     out_dir = Path(out_dir)
     summary = result.to_frame()
     summary.to_csv(out_dir / "summary.csv", index=False)
     summary.to_parquet(out_dir / "summary.parquet", index=False)
     histogram_table(result).to_parquet(out_dir / HISTOGRAMS, index=False)
     if result.trials:
-        pd.concat(result.trials.values(), ignore_index=True).to_parquet(
-            out_dir / "trials.parquet", index=False)
+        trials_table(result).to_parquet(out_dir / "trials.parquet", index=False)
     options_record = {k: str(v) if isinstance(v, Path) else v
                       for k, v in asdict(options).items()}
     prov = study_provenance(result, options_record)
     (out_dir / PROVENANCE).write_text(json.dumps(prov, indent=2, default=str))
     (out_dir / "plots").mkdir()
-    names = _draw(result, summary, out_dir / "plots", fmt)
-    (out_dir / "report.md").write_text(render_report(result, summary, prov, names))
+    names, figures = _draw(result, summary, out_dir / "plots", fmt)
+    md = render_report(result, summary, prov, names)
+    (out_dir / "report.md").write_text(md)
+    write_html(out_dir, figures, f"Study {result.study.header.name}", md)
     return out_dir
 
 
-def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str) -> list[str]:
-    """Save every figure into ``plots`` as ``fmt``; returns the file names."""
-    names = []
+def trials_table(result: StudyResult) -> pd.DataFrame:
+    """The per-trial values of every grid point as ``trials.parquet`` holds them: ``point``,
+    ``trial`` and one column ``<variant>/<metric>_<unit>`` per value, in the metric's display
+    unit as in ``summary.csv`` (mrad, arcsec, ...; no suffix for a ratio or a rate)."""
+    metrics = {m.name: m for _, m in result.study.metrics}
+    frames = []
+    for frame in result.trials.values():
+        out = frame[["point", "trial"]].copy()
+        for col in frame.columns[2:]:
+            metric = metrics[col.rpartition("/")[2]]
+            suffix = "" if metric.unit == "1" else f"_{metric.unit}"
+            out[f"{col}{suffix}"] = frame[col].to_numpy(float) * metric.scale
+        frames.append(out)
+    return pd.concat(frames, ignore_index=True)
+
+
+def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str
+          ) -> tuple[list[str], dict[str, HtmlFigure]]:
+    """Save every figure into ``plots`` as ``fmt`` (the same bytes on every render, see
+    :func:`montecarlo.io.files.figure_bytes`); returns the file names and the figures for
+    report.html (inline SVG with captions), by file name."""
+    import matplotlib.pyplot as plt
+
+    names, figures = [], {}
     for name, fig in all_figures(result, summary):
         name = f"{Path(name).stem}.{fmt}"
-        fig.savefig(plots / name, dpi=110)
+        save_figure(fig, plots / name, dpi=110)
+        figures[name] = HtmlFigure(figure_svg(fig), figure_caption(result, name))
+        plt.close(fig)
         names.append(name)
-    return names
+    return names, figures
 
 
 def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, Any]]:
-    """Draw the plots and write report.md of a result directory again from its saved data.
+    """Draw the plots and write report.md and report.html of a result directory again from its
+    saved data.
 
     The new plots are drawn into a temporary directory beside ``plots/`` and swapped in only
-    when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes.
+    when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes. A
+    file the user added to ``plots/`` (not in the result's list of written files) is not
+    deleted: the command refuses. The lock of the result directory is held meanwhile
+    (:class:`montecarlo.io.files.OutputLock`), and the list of written files is brought up to
+    date afterwards.
     """
     path = Path(path)
     result, summary, prov = load_result(path)
+    with OutputLock(path):
+        listed = prov.get(FILES_KEY)
+        foreign = [rel for rel in foreign_entries(path, prov) or []
+                   if rel.split("/")[0] == "plots" and rel not in (listed or {})]
+        if foreign:
+            raise InputError(f"{path}: {foreign[0]!r} was not written by `montecarlo run`; "
+                             "move it out of plots/ before drawing them again")
+        names = _redraw(path, result, summary, prov, fmt)
+        update_written_files(path, ("plots", "report.md", "report.html"))
+    return names, prov
+
+
+def _redraw(path: Path, result: StudyResult, summary: pd.DataFrame, prov: dict[str, Any],
+            fmt: str) -> list[str]:
     for stale in [*path.glob(".plots.tmp-*"), *path.glob(".plots.old-*")]:  # a killed rerun's
         shutil.rmtree(stale, ignore_errors=True)
     staging = Path(tempfile.mkdtemp(prefix=".plots.tmp-", dir=path))
     try:
-        names = _draw(result, summary, staging, fmt)
-        atomic_write_bytes(path / "report.md",
-                           render_report(result, summary, prov, names).encode())
+        names, figures = _draw(result, summary, staging, fmt)
+        md = render_report(result, summary, prov, names)
+        atomic_write_bytes(path / "report.md", md.encode())
+        write_html(path, figures, f"Study {result.study.header.name}", md)
         old = path / "plots"
         if old.exists():
             retired = Path(tempfile.mkdtemp(prefix=".plots.old-", dir=path))
@@ -83,4 +138,4 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
     finally:
         if staging.exists():
             shutil.rmtree(staging)
-    return names, prov
+    return names

@@ -47,7 +47,7 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
     out = sel[["point", *study.sweep_keys, "variant", "trials", "invalid_fraction"]].copy()
     out[f"{stat} (valid trials)"] = sel[stat]
     out[f"{stat} (all trials)"] = sel["spec_value"]
-    if stat.startswith("p"):
+    if stat.startswith(("p", "cvar")):
         out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" if sampling == "random" else "exact"
                              for a, b, sampling in zip(sel["spec_lo"], sel["spec_hi"],
                                                        sel["sampling"], strict=True)]
@@ -60,6 +60,35 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
                                                  "enumerated": "all corners"})
     out["verdict"] = sel["verdict"]
     return out.rename(columns={k: key_label(k) for k in study.sweep_keys})
+
+
+def nominal_table(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame:
+    """One row per grid point and variant: every metric in the nominal case (each error
+    source at its centre, one trial), in its display unit."""
+    study = result.study
+    keys = ["point", *study.sweep_keys, "variant"]
+    wide = summary.pivot(index=["point", "variant"], columns="metric", values="nominal")
+    units = {m.name: m.unit for _, m in study.metrics}
+    names = [c for c in dict.fromkeys(m.name for _, m in study.metrics) if c in wide.columns]
+    wide = wide[names].rename(columns={c: f"{c} [{units[c]}]" for c in names})
+    table = summary.drop_duplicates(["point", "variant"])[keys].merge(
+        wide.reset_index(), on=["point", "variant"])
+    return table.rename(columns={k: key_label(k) for k in study.sweep_keys})
+
+
+def nominal_section(result: StudyResult, summary: pd.DataFrame) -> list[str]:
+    """The report's nominal-case section (the ``nominal`` column of the summary)."""
+    table = nominal_table(result, summary)
+    if table.drop(columns=table.columns[:len(result.study.sweep_keys) + 2]).isna().all().all():
+        return ["## Nominal case", "",
+                f"The {result.study.header.system} system draws quantities that have no centre "
+                "(random signs or choices): it has no nominal case.", ""]
+    return ["## Nominal case", "",
+            "Every error source at its centre (the centre of a bounded or corner source, the "
+            "mean of a normal, the median of a lognormal), one trial, no sampling: what the "
+            "design gives without error (column `nominal` of the summary). With every error "
+            "centred on zero it is zero; anything else points at the geometry.", "",
+            markdown_table(table, ".4g"), ""]
 
 
 def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[str, Any],
@@ -103,8 +132,8 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
                   markdown_table(verdicts), ""]
 
     cols = ["point", *study.sweep_keys, "variant", "count", "invalid", "sampling", "mean", "std",
-            "p50",
-            "p95", "p95_lo", "p95_hi", "p99", "max"]
+            "p50", "p95", "p95_lo", "p95_hi", "p99", "cvar95", "max"]
+    cols = [c for c in cols if c in summary]
     if (summary["invalid_fraction"] > 0).any():
         cols.insert(cols.index("invalid") + 1, "invalid_fraction")
     table = summary.loc[summary["metric"] == metric, cols].rename(
@@ -115,6 +144,9 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
               "trials enumerate the worst-case corners (`sampling = enumerated`) the statistics "
               "are exact and have no confidence interval.", "",
               markdown_table(table), ""]
+
+    if "nominal" in summary:
+        lines += nominal_section(result, summary)
 
     inv = summary[summary["invalid"] > 0]
     if len(inv):

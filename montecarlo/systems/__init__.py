@@ -68,19 +68,22 @@ REGISTRY: dict[str, Callable[[], System]] = {
 """System name -> factory; each system's module is imported only when a study names it."""
 
 
-def load_study(path: str | Path, *, trials: int | None = None, seed: int | None = None
-               ) -> Study:
-    """Read, validate and expand a study file; ``trials``/``seed`` override the file's.
+def load_study(path: str | Path, *, trials: int | None = None, seed: int | None = None,
+               max_points: int = _study.MAX_POINTS) -> Study:
+    """Read, validate and expand a study file; ``trials``/``seed`` override the file's; a
+    sweep of more than ``max_points`` grid points is refused before it is expanded.
 
     Raises
     ------
     montecarlo.errors.InputError
         One line naming the file, the key and the value.
     """
-    return _study.load_study(path, REGISTRY, trials=trials, seed=seed)
+    return _study.load_study(path, REGISTRY, trials=trials, seed=seed, max_points=max_points)
 
 
 def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
-                    trials: int | None = None, seed: int | None = None) -> Study:
+                    trials: int | None = None, seed: int | None = None,
+                    max_points: int = _study.MAX_POINTS) -> Study:
     """Validate and expand a study given as a dict (the parsed TOML); ``path`` labels errors."""
-    return _study.study_from_dict(raw, REGISTRY, path, trials=trials, seed=seed)
+    return _study.study_from_dict(raw, REGISTRY, path, trials=trials, seed=seed,
+                                  max_points=max_points)

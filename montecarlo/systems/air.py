@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from montecarlo.engine.system import Metric
 from montecarlo.seed000 import air
+from montecarlo.systems.imu_grades import PRESETS
 from montecarlo.systems.params import ParamSystem
 from montecarlo.units import SUFFIXES
 
@@ -41,5 +42,6 @@ AIR = ParamSystem(
             **dict.fromkeys(("mount_psi", "mount_theta", "mount_gamma", "aircraft_heading",
                              "aircraft_pitch", "aircraft_roll"), (-360.0, 360.0))},
     choices={"ta_source": air.TA_SOURCES, "level_split": air.LEVEL_SPLITS},
+    presets=PRESETS["air"],
 )
 """Seed 000, section 2: air dynamic calibration (:func:`montecarlo.seed000.air.run_trials`)."""

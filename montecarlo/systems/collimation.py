@@ -63,8 +63,8 @@ METRICS = ("axis_az_error", "axis_el_error", "axis_az_sigma", "axis_el_sigma",
 """Names of the per-trial metrics returned by :func:`run_trials`."""
 
 
-def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
-               ) -> dict[str, FloatArray]:
+def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator, n: int,
+               reference: bool = False) -> dict[str, FloatArray]:
     """Monte Carlo trials of the seed 003 calibration for the study runner.
 
     Each trial simulates one calibration (:func:`simulate_readings`) on :func:`paper_layout`
@@ -89,6 +89,9 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         ``free_roll`` [0/1] and ``roll_prior_sigma`` [rad].
     rng : numpy Generator, the only source of randomness.
     n : number of trials.
+    reference : with ``procedure``, fit trial by trial (the literal path) instead of the whole
+        block at once (:mod:`montecarlo.seed003.batch_fit`, equal to it within the tolerance
+        tests/test_collimation_batch.py states).
 
     Returns
     -------
@@ -110,7 +113,7 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {sorted(DEFAULT_PARAMS)}")
     p = {**DEFAULT_PARAMS, **params}
     if int(p["procedure"]):
-        return _procedure_trials(p, rng, n)
+        return _procedure_trials(p, rng, n, reference)
     az, el, _ = paper_layout(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
                              float(p["pitch_span"]))
     truth = {k: float(p[k]) for k in parameter_names(EFFECTS)}
@@ -151,8 +154,8 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
     return out
 
 
-def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generator, n: int
-                      ) -> dict[str, FloatArray]:
+def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generator, n: int,
+                      reference: bool = False) -> dict[str, FloatArray]:
     """Trials of the paper's procedure (:mod:`montecarlo.seed003.procedure`).
 
     Mirrors: ``n_azimuth`` horizontal ones at ``linspace(-0.4, 0.6, n_azimuth) * azimuth_span``
@@ -163,7 +166,8 @@ def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generat
     ``mount_roll_sigma`` > 0: the cost of an unrecorded roll). ``frame_tilt_*`` and
     ``fit_frame_tilt`` are not used. Metrics as :func:`run_trials`; ``frame_heading_error`` and
     ``residual_rms_before`` are NaN; ``consistency_max_after`` is the largest angle between a
-    corrected reading and the theodolite's relative direction.
+    corrected reading and the theodolite's relative direction. Without ``reference`` the block
+    is simulated and fitted at once (:func:`_procedure_block`) when the reading errors are given.
     """
     from montecarlo.seed003 import procedure as pr
     from montecarlo.seed003 import reference as ref
@@ -180,6 +184,8 @@ def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generat
     s_ins = math.sqrt((noise.ins_heading ** 2 + noise.ins_pitch ** 2) / 2)
     given = s_ins > 0 or noise.theodolite > 0
     truth = (float(p["axis_az"]), float(p["axis_el"]))
+    if given and not reference:
+        return _procedure_block(p, rng, n, az, el, noise, side, free, truth)
     u_true = direction(*truth)
     out = {k: np.full(n, np.nan) for k in METRICS}
     for i in range(n):
@@ -211,6 +217,45 @@ def _procedure_trials(p: Mapping[str, float | int | str], rng: np.random.Generat
         a, b = ref.direction(c_az, c_el), ref.direction(t_az, t_el)
         out["consistency_max_after"][i] = np.max(np.arctan2(
             np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1)))
+    return out
+
+
+def _procedure_block(p: Mapping[str, float | int | str], rng: np.random.Generator, n: int,
+                     az: FloatArray, el: FloatArray, noise: Noise, side: float, free: bool,
+                     truth: tuple[float, float]) -> dict[str, FloatArray]:
+    """:func:`_procedure_trials` for a whole block at once (:mod:`montecarlo.seed003.batch_fit`)."""
+    from montecarlo.seed003 import batch_fit as bf
+    from montecarlo.seed003.procedure import NotDetermined
+
+    s_ins = math.sqrt((noise.ins_heading ** 2 + noise.ins_pitch ** 2) / 2)
+    out = {k: np.full(n, np.nan) for k in METRICS}
+    data = bf.simulate_block(*truth, az, el, noise, rng, n, side=side,
+                             frame_heading=float(p["frame_heading"]),
+                             reference_rows=bool(int(p["reference_rows"])),
+                             with_roll=bool(int(p["use_roll"])) and not free)
+    try:
+        f = bf.fit_block(data, side=side, free_roll=free, roll_sigma=float(p["roll_prior_sigma"]),
+                         sigma_ins=s_ins, sigma_theodolite=noise.theodolite)
+    except NotDetermined:
+        return out
+    ok = f.ok
+    se = np.sqrt(np.diagonal(f.covariance, axis1=1, axis2=2))
+    for j, k in enumerate(("axis_az", "axis_el")):
+        err = f.values[:, j] - truth[j]
+        out[f"{k}_error"] = err
+        out[f"{k}_sigma"] = se[:, j]
+        out[f"{k}_within_2sigma"] = np.where(ok, (np.abs(err) <= 2 * se[:, j]).astype(float),
+                                             np.nan)
+    u, u_true = direction(f.values[:, 0], f.values[:, 1]), direction(*truth)
+    out["axis_error_angle"] = np.arctan2(np.linalg.norm(np.cross(u, u_true), axis=-1),
+                                         u @ u_true)
+    out["residual_rms_after"] = np.sqrt(np.mean(f.residuals ** 2, axis=-1))
+    injected = math.sqrt(s_ins ** 2 + noise.theodolite ** 2)
+    if injected > 0:
+        out["residual_rms_ratio"] = out["residual_rms_after"] / injected
+    out["chi2_red"] = f.chi2 / f.dof
+    out["consistency_max_after"] = np.where(
+        ok, np.max(bf.consistency_angles(data, f, side), axis=-1, initial=-np.inf), np.nan)
     return out
 
 

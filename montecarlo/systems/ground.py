@@ -19,7 +19,9 @@ point runs exactly 2**k trials, the corners; its ``max`` is the worst case of Ta
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import time
 from dataclasses import dataclass
 from typing import Literal
 
@@ -156,6 +158,10 @@ def _pixel_corner_names(relation: str | float) -> tuple[str, ...]:
     return ("pixel_a_x", "pixel_a_z", "pixel_b_x", "pixel_b_z")
 
 
+STAGES = ("draws", "solve", "metrics", "accumulation")
+"""Stages of the fast path, as :meth:`GroundSystem.accumulate_block` times them."""
+
+
 @functools.lru_cache(maxsize=2)
 def _draw_buffers(n: int) -> np.ndarray:
     """Draw buffers of one block for the fast path, reused by every block of a process."""
@@ -214,6 +220,17 @@ class GroundSystem:
 
     def trials_per_point(self, prepared: PreparedGround, requested: int) -> int:
         return requested if self.is_sampled(prepared) else 1 << len(prepared.corners)
+
+    def nominal(self, prepared: PreparedGround) -> PreparedGround:
+        """The grid point with every error source fixed at its centre (its location), corner
+        sources included: the nominal case (:mod:`montecarlo.engine.nominal`)."""
+        def centre(d: Distribution) -> Distribution:  # a lognormal's centre is its median
+            return Distribution("fixed", d.location + (d.scale if d.kind == "lognormal" else 0.0))
+
+        return dataclasses.replace(
+            prepared, mounting=tuple(centre(d) for d in prepared.mounting),  # type: ignore
+            placement={k: centre(d) for k, d in prepared.placement.items()},
+            pixel=centre(prepared.pixel), corners=())
 
     def unit_draws(self, p: PreparedGround, streams: Streams, first_trial: int, n: int,
                    buffers: np.ndarray | None = None
@@ -297,8 +314,15 @@ class GroundSystem:
         return values, invalid
 
     def accumulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
-                         n: int, block: int, stats: PointStats) -> None:
-        """The same trials through the fused kernel, aggregated straight into ``stats``."""
+                         n: int, block: int, stats: PointStats,
+                         clock: dict[str, float] | None = None) -> None:
+        """The same trials through the fused kernel, aggregated straight into ``stats``.
+
+        ``clock``, if given, receives the CPU seconds of the calling thread spent in each stage
+        (``draws``, ``solve``, ``metrics``, ``accumulation``; added to what it holds), for the
+        benchmark's roofline. The kernels run in the calling thread, and its CPU time leaves
+        out the time other processes take from it on a busy machine.
+        """
         from montecarlo.engine import accumulate  # numba: loaded only where kernels run
         from montecarlo.seed000 import ground_kernel as gk
 
@@ -308,7 +332,9 @@ class GroundSystem:
         cam = p.camera
         acc = accumulate.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
+        tick = time.thread_time if clock is not None else None
         for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
+            t0 = tick() if tick else 0.0
             m = min(gk.SUB_CHUNK, n - s)
             flags, fields, bins, out_rows = _scratch(m)
             true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
@@ -316,13 +342,21 @@ class GroundSystem:
             fixed = all(isinstance(a, float) for a in true)
             C = mounting_matrix(*true).reshape(9) if fixed else \
                 np.ascontiguousarray(mounting_matrix(*true).reshape(m, 9).T)
+            t1 = tick() if tick else 0.0
             gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
                            cam.n_z / 2.0, rows, affine, flags, fields, out_rows)
+            t2 = tick() if tick else 0.0
             gk.metrics_in_place(fields)
+            t3 = tick() if tick else 0.0
             for i in range(2):
                 if flags[i].any():
                     flag_counts[i] += np.bincount(flags[i], minlength=256)
             accumulate.accumulate(fields, gk.METRIC_ROWS, hist, acc, bins)
+            if tick and clock is not None:
+                t4 = tick()
+                for stage, spent in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3),
+                                        strict=True):
+                    clock[stage] = clock.get(stage, 0.0) + spent
         moments = {key: tuple(acc[r]) for r, key in enumerate(keys) if key[0] in p.variants}
         invalid = {v: reason_counts(flag_counts[i]) for i, v in enumerate(SOLVERS)
                    if v in p.variants}

@@ -55,6 +55,8 @@ class ParamSystem:
     limits : parameter -> (lowest, highest) allowed, in the study-file unit (None: open), so
         that a value no trial could use is refused when the study is loaded.
     choices : parameter -> the texts a text parameter may take.
+    presets : grade -> parameters it sets [SI units], chosen by ``[imu] grade = "..."``
+        (:mod:`montecarlo.systems.imu_grades`); a parameter given in ``[params]`` wins.
     """
 
     name: str
@@ -66,6 +68,7 @@ class ParamSystem:
     seconds_per_trial: float = 1e-3
     limits: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    presets: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 
     def key(self, param: str) -> str:
         """The study-file key of a parameter: its name and unit suffix."""
@@ -84,16 +87,33 @@ class ParamSystem:
             low, high = self.limits.get(param, (None, None))
             fields[self.key(param)] = (kind, Field(default=value, ge=low, le=high))
         params = create_model(f"{self.name}_params", __base__=Strict, **fields)
-        return create_model(f"{self.name}_config", __base__=Strict, params=(params, params()))
+        tables: dict[str, Any] = {"params": (params, params())}
+        if self.presets:
+            grade = Literal[tuple(self.presets)] | None  # type: ignore[valid-type]
+            imu = create_model(f"{self.name}_imu", __base__=Strict,
+                               grade=(grade, Field(default=None)))
+            tables["imu"] = (imu, imu())
+        return create_model(f"{self.name}_config", __base__=Strict, **tables)
 
     def prepare(self, config: Any) -> PreparedParams:
         given = config.params.model_dump()
+        explicit = config.params.model_fields_set
+        grade = getattr(getattr(config, "imu", None), "grade", None)
+        preset = {k: v for k, v in (self.presets.get(grade, {}) if grade else {}).items()
+                  if self.key(k) not in explicit}  # an explicit number wins
         params = {}
         for param in self.defaults:
             value = given[self.key(param)]
             scale = SUFFIXES[self.units.get(param, "")]
             params[param] = value * scale if isinstance(value, float) else value
+        params.update(preset)
+        for param, value in preset.items():
+            given[self.key(param)] = value / SUFFIXES[self.units.get(param, "")]
         described = tuple(f"{k} = {v}" for k, v in given.items())
+        if grade:
+            described += (f"imu grade {grade} (Groves 2013, Tables 4.1-4.2) sets "
+                          + (", ".join(self.key(k) for k in preset) or "nothing: every figure "
+                             "it would set is given in [params]"),)
         return PreparedParams(params, described)
 
     def metrics(self, prepared: PreparedParams) -> list[tuple[str, Metric]]:

@@ -19,6 +19,7 @@ from montecarlo.geometry.camera import Camera
 from montecarlo.seed001 import simulate as sim
 from montecarlo.seed001.estimate import ROLL, estimate_record
 from montecarlo.seed001.kinematics import MOUNTS, Rocking
+from montecarlo.systems.imu_grades import PRESETS
 from montecarlo.systems.params import ParamSystem, angle_metrics
 
 FloatArray = NDArray[np.float64]
@@ -215,5 +216,6 @@ STABILIZATION = ParamSystem(
             "fov": (0.01, 90.0), "pixels": (1.0, 1e5), "forgetting": (0.5, 1.0),
             "max_passes": (1.0, 100.0), "target_offset": (0.0, 1e4)},
     choices={"mount": MOUNTS, "gyro_sampling": sim.GYRO_SAMPLINGS},
+    presets=PRESETS["stabilization"],
 )
 """Seed 001: gyro indirect stabilisation installation angles, as a study system."""

@@ -106,6 +106,124 @@ def _block_rate(n: int, repeats: int, fast: bool) -> float:
     return _median_rate(run, n, repeats)
 
 
+def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
+    """Where the fast ground path's time goes on one core, stage by stage, against ceilings.
+
+    The stages of ``GroundSystem.accumulate_block`` (draws, solve, metrics, accumulation) are
+    timed over ``n`` trials of the workload; each against its own ceiling, measured in the
+    same run on the same sub-chunks (``ground_kernel.SUB_CHUNK`` trials): the draws against
+    the generator alone filling as many U[0, 1) numbers into a reused buffer, the metrics
+    against the same ufuncs alone on contiguous copies of the same arguments, the solve and
+    the accumulation against a memory copy of as many bytes as they read and write. Times
+    are CPU times of this thread (so that other processes' load does not enter; the kernels
+    run in this thread), medians of ``repeats`` runs [ns per trial]; ``fraction`` is
+    ceiling / stage.
+    """
+    from montecarlo.seed000 import ground_kernel as gk
+    from montecarlo.systems.ground import STAGES, _scratch
+
+    study = _study(n)
+    system, p = study.system, study.points[0].prepared
+    bs = study.block_size
+    m = min(gk.SUB_CHUNK, n)
+    chunks = -(-n // m)
+
+    def stages() -> dict[str, float]:
+        clock: dict[str, float] = {}
+        stats = PointStats()
+        for b, first in enumerate(range(0, n, bs)):
+            system.accumulate_block(p, Streams(1, 0, b), first, min(bs, n - first), b, stats,
+                                    clock)
+        return clock
+
+    _, rows, affine = system.unit_draws(p, Streams(1, 0, 0), 0, m)
+    n_random = len({id(r) for r in rows})  # distinct rows drawn (common pixel rows shared)
+    flags, fields, _, out_rows = _scratch(m)
+    C = np.ascontiguousarray(np.eye(3).reshape(9))
+    cam = p.camera
+    gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0, cam.n_z / 2.0,
+                   rows, affine, flags, fields, out_rows)
+    args = [fields[a:b].copy() for a, b in ((0, 6), (6, 12), (12, 14), (14, 16))]
+    work = [a.copy() for a in args]
+    gen = np.random.Generator(np.random.PCG64(1))
+    draw_buf = np.empty((n_random, m))
+    solve_bytes = n_random * 8 + 16 * 8 + 2 * 2  # rows in; 16 field rows, 2 flags out
+    acc_bytes = len(gk.METRIC_ROWS) * 8 + 2 * 2 + 4  # metric rows, flags in; bins out
+    copies = {k: (np.ones(v * m // 8), np.empty(v * m // 8))
+              for k, v in (("solve", solve_bytes), ("accumulation", acc_bytes))}
+
+    def generator() -> None:
+        for _ in range(chunks):
+            for row in draw_buf:
+                gen.random(out=row)
+
+    def ufuncs() -> None:
+        for _ in range(chunks):
+            for a, w in zip(args, work, strict=True):
+                np.copyto(w, a)  # fresh arguments each time (not timed apart; see below)
+            np.arctan2(work[0], work[1], out=work[0])
+            np.arccos(work[2], out=work[2])
+            np.arcsin(work[3], out=work[3])
+
+    def refresh() -> None:
+        for _ in range(chunks):
+            for a, w in zip(args, work, strict=True):
+                np.copyto(w, a)
+
+    def memcpy(key: str) -> None:
+        src, dst = copies[key]
+        for _ in range(chunks):
+            np.copyto(dst, src)
+
+    def timed(fn) -> float:
+        t0 = time.thread_time()
+        fn()
+        return time.thread_time() - t0
+
+    stages()  # warm-up: compilation, caches
+    spent: dict[str, list[float]] = {k: [] for k in (*STAGES, "total")}
+    ceiling: dict[str, list[float]] = {k: [] for k in STAGES}
+    for _ in range(repeats):  # stages and ceilings alternate
+        clock = stages()
+        for k in STAGES:
+            spent[k].append(clock[k])
+        spent["total"].append(sum(clock.values()))
+        ceiling["draws"].append(timed(generator))
+        ceiling["metrics"].append(max(timed(ufuncs) - timed(refresh), 0.0))
+        ceiling["solve"].append(timed(functools.partial(memcpy, "solve")))
+        ceiling["accumulation"].append(timed(functools.partial(memcpy, "accumulation")))
+    scale = 1e9 / n
+    what = {"draws": f"the generator alone, {n_random} U[0, 1) per trial",
+            "solve": f"memory copy of {solve_bytes} B per trial (draws in, fields out)",
+            "metrics": "the same ufuncs alone (arctan2 x6, arccos x2, arcsin x2)",
+            "accumulation": f"memory copy of {acc_bytes} B per trial (metrics in, bins out)"}
+    out: dict[str, Any] = {"trials": n, "sub_chunk": m, "stages": []}
+    for k in STAGES:
+        stage = statistics.median(spent[k]) * scale
+        ceil = statistics.median(ceiling[k]) * scale
+        out["stages"].append({"stage": k, "ns_per_trial": stage, "ceiling": what[k],
+                              "ceiling_ns_per_trial": ceil,
+                              "fraction": ceil / stage if stage > 0 else float("nan")})
+    out["total_ns_per_trial"] = statistics.median(spent["total"]) * scale
+    return out
+
+
+def format_roofline(r: dict[str, Any]) -> list[str]:
+    """The roofline table of :func:`ground_roofline`."""
+    total = r["total_ns_per_trial"]
+    lines = [f"roofline of the fused ground path, one core, CPU time ({r['trials']:,} trials "
+             f"in sub-chunks of {r['sub_chunk']:,}); fraction = ceiling / stage:",
+             f"  {'stage':<13}{'ns/trial':>9}{'share':>7}  {'ceiling ns/trial':>16}"
+             f"{'fraction':>9}  ceiling"]
+    for s in r["stages"]:
+        lines.append(f"  {s['stage']:<13}{s['ns_per_trial']:>9.1f}"
+                     f"{100 * s['ns_per_trial'] / total:>6.0f}%  "
+                     f"{s['ceiling_ns_per_trial']:>16.1f}{100 * s['fraction']:>8.0f}%  "
+                     f"{s['ceiling']}")
+    lines.append(f"  {'total':<13}{total:>9.1f}   100%  ({1e3 / total:.1f} M trials/s)")
+    return lines
+
+
 def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> float:
     """(d) trials per second through run_study on ``n_jobs`` loky workers."""
     study = _study(n)
@@ -213,20 +331,31 @@ def host_probe() -> float:
 
 
 def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
-    """All figures of the benchmark (``quick``: small sizes, for tests)."""
+    """All figures of the benchmark.
+
+    ``quick`` (what ``make bench`` runs, under 30 s on two quiet cores): the roofline and every
+    row at small sizes, the runner scaling at 10^5 and 10^6 trials, the memory of one 10^6-trial
+    study, no cold-cache compile. Otherwise (``--full``) the sizes of the full benchmark:
+    scaling up to 10^8 trials, memory at 10^4 and 10^8, the compile time with an empty cache.
+    """
+    started, load_before = time.perf_counter(), list(os.getloadavg())
     probe_before = host_probe()
     big = 10**6 if quick else 10**8
-    sizes = [10**k for k in range(4, 7 if quick else 9)]
+    sizes = [10**5, 10**6] if quick else [10**k for k in range(4, 9)]
+    roofline = ground_roofline(2**20 if quick else 2**23, repeats)
     naive = naive_rate(200 if quick else 2000, repeats)
     reference = _block_rate(2**16 if quick else 2**18, repeats, fast=False)
-    fast1 = _block_rate(2**18 if quick else 2**22, repeats, fast=True)
+    fast1 = _block_rate(2**20 if quick else 2**22, repeats, fast=True)
     scaling = [{"trials": n, "trials_per_s": runner_rate(n, repeats)} for n in sizes]
     fast2 = scaling[-1]["trials_per_s"]
-    memory = {n: study_memory(n) for n in (sizes[0], big)}
+    memory = {n: study_memory(n) for n in ((big,) if quick else (sizes[0], big))}
     duration = 5.0 if quick else 60.0
     stab_reference, stab_fast = stabilization_rates(8 if quick else 64, 64 if quick else 256,
                                                     min(repeats, 3), duration)
     return {
+        "quick": quick,
+        "load_average": load_before,
+        "roofline": roofline,
         "naive_trials_per_s": naive,
         "reference_trials_per_s": reference,
         "fast_trials_per_s_1core": fast1,
@@ -243,8 +372,10 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         "stabilization_fast_trials_per_s": stab_fast,
         "stabilization_ratio": stab_fast / stab_reference,
         "stabilization_duration_s": duration,
-        "compile_seconds_cold_cache": compile_seconds(),
+        "compile_seconds_cold_cache": None if quick else compile_seconds(),
         "host_probe_atan2_per_s": [probe_before, host_probe()],
+        "load_average_after": list(os.getloadavg()),
+        "bench_seconds": time.perf_counter() - started,
         "scaling": scaling,
         "repeats": repeats,
         "cpu_count": os.cpu_count(),
@@ -259,9 +390,16 @@ def format_bench(r: dict[str, Any]) -> str:
             ("(b) vectorised literal reference, 1 core", "reference_trials_per_s"),
             ("(c) fused kernel, 1 core", "fast_trials_per_s_1core"),
             ("(d) fused kernel through the runner, 2 cores", "fast_trials_per_s_2core")]
+    compiled = r["compile_seconds_cold_cache"]
     lines = [
         f"workload: {r['workload']}",
-        f"median of {r['repeats']} runs each, {r['cpu_count']} CPUs",
+        f"median of {r['repeats']} runs each, {r['cpu_count']} CPUs, "
+        f"{'quick' if r['quick'] else 'full'} sizes, {r['bench_seconds']:.0f} s in all; "
+        "load average "
+        + " ".join(f"{x:.2f}" for x in r["load_average"]) + " at the start, "
+        + " ".join(f"{x:.2f}" for x in r["load_average_after"]) + " at the end",
+        "",
+        *format_roofline(r["roofline"]),
         "",
         *(f"{label:<46}{r[key]:>14,.0f} trials/s" for label, key in rows),
         "",
@@ -270,7 +408,8 @@ def format_bench(r: dict[str, Any]) -> str:
         f"memory of `montecarlo run` on a {r['peak_memory_trials']:.0e}-trial study: largest "
         f"process RSS {r['peak_rss_mb']:.0f} MB; whole tree RSS {r['peak_tree_rss_mb']:.0f} MB,"
         f" PSS {r['peak_tree_pss_mb']:.0f} MB",
-        f"first-run compile time (empty numba cache): {r['compile_seconds_cold_cache']:.1f} s",
+        "first-run compile time (empty numba cache): "
+        + (f"{compiled:.1f} s" if compiled is not None else "not measured (--full measures it)"),
         "host speed probe (numpy arctan2 per second, one core, before/after): "
         + " / ".join(f"{p / 1e6:.0f} M" for p in r["host_probe_atan2_per_s"])
         + " (a shared host's speed moves with its load; so do the rates above)",

@@ -1,0 +1,1 @@
+"""Camera calibration from a planar target seen in several views (Zhang's method)."""
