@@ -277,19 +277,28 @@ def test_free_roll_dof_counts_the_roll_prior(rows, expected_dof):
 def test_study_hands_the_fit_the_per_reading_ins_sigma(monkeypatch):
     """docs/collimation.md: the procedure's fit takes sigma_INS per heading, pitch and roll
     read, not the root-sum-square of heading and pitch (a residual's). With INS heading and
-    pitch errors of 3″ each and the theodolite's 2″, the fit must be handed 3″ and 2″."""
+    pitch errors of 3″ each and the theodolite's 2″, the fit must be handed 3″ and 2″, on the
+    literal path (trial by trial) and on the block path."""
+    from montecarlo.seed003 import batch_fit as bf
     from montecarlo.systems import collimation as sc
 
     seen = []
-    real = pr.fit_procedure
+    real, real_block = pr.fit_procedure, bf.fit_block
 
     def spy(data, **kw):
         seen.append((kw["sigma_ins"], kw["sigma_theodolite"]))
         return real(data, **kw)
 
+    def spy_block(data, **kw):
+        seen.append((kw["sigma_ins"], kw["sigma_theodolite"]))
+        return real_block(data, **kw)
+
     monkeypatch.setattr(pr, "fit_procedure", spy)
-    sc.run_trials({"procedure": 1, "ins_heading_sigma": 3 * A, "ins_pitch_sigma": 3 * A,
-                   "ins_roll_sigma": 3 * A, "theodolite_sigma": 2 * A},
-                  np.random.default_rng(0), 1)
-    assert seen and seen[0][0] / A == pytest.approx(3.0, rel=1e-12)
-    assert seen[0][1] / A == pytest.approx(2.0, rel=1e-12)
+    monkeypatch.setattr(bf, "fit_block", spy_block)
+    params = {"procedure": 1, "ins_heading_sigma": 3 * A, "ins_pitch_sigma": 3 * A,
+              "ins_roll_sigma": 3 * A, "theodolite_sigma": 2 * A}
+    for reference in (True, False):
+        seen.clear()
+        sc.run_trials(params, np.random.default_rng(0), 1, reference=reference)
+        assert seen and seen[0][0] / A == pytest.approx(3.0, rel=1e-12)
+        assert seen[0][1] / A == pytest.approx(2.0, rel=1e-12)
