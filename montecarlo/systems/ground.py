@@ -175,7 +175,8 @@ def _scratch(m: int) -> tuple[np.ndarray, ...]:
     from montecarlo.seed000 import ground_kernel as gk
 
     fields = np.empty((2 * gk.N_FIELDS, m))
-    return np.empty((2, m), np.uint16), fields, np.empty(m, np.int32), gk.output_rows(fields)
+    bins = np.empty(min(m, gk.SUB_CHUNK), np.int32)
+    return np.empty((2, m), np.uint16), fields, bins, gk.output_rows(fields)
 
 
 class GroundSystem:
@@ -321,15 +322,22 @@ class GroundSystem:
         acc = accumulate.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
         tick = time.thread_time if clock is not None else None
-        for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
+        # The whole block is drawn at once (each source's generator gives the same numbers in
+        # one call as in several), then solved and reduced SOLVE_CHUNK trials at a time; the
+        # statistics are merged SUB_CHUNK trials at a time whatever SOLVE_CHUNK is.
+        t0 = tick() if tick else 0.0
+        true, block_rows, affine = self.unit_draws(p, streams, first_trial, n, _draw_buffers(n))
+        fixed = all(isinstance(a, float) for a in true)
+        block_C = mounting_matrix(*true).reshape(9) if fixed else \
+            np.ascontiguousarray(mounting_matrix(*true).reshape(n, 9).T)
+        if tick and clock is not None:
+            clock["draws"] = clock.get("draws", 0.0) + tick() - t0
+        for s in range(0, n, gk.SOLVE_CHUNK):
             t0 = tick() if tick else 0.0
-            m = min(gk.SUB_CHUNK, n - s)
+            m = min(gk.SOLVE_CHUNK, n - s)
             flags, fields, bins, out_rows = _scratch(m)
-            true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
-                                                 _draw_buffers(m))
-            fixed = all(isinstance(a, float) for a in true)
-            C = mounting_matrix(*true).reshape(9) if fixed else \
-                np.ascontiguousarray(mounting_matrix(*true).reshape(m, 9).T)
+            rows = [r[s:s + m] for r in block_rows]
+            C = block_C if fixed else block_C[:, s:s + m]
             t1 = tick() if tick else 0.0
             gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
                            cam.n_z / 2.0, rows, affine, flags, fields, out_rows)
@@ -339,7 +347,7 @@ class GroundSystem:
             for i in range(2):
                 if flags[i].any():
                     flag_counts[i] += np.bincount(flags[i], minlength=256)
-            accumulate.accumulate(fields, gk.METRIC_ROWS, hist, acc, bins)
+            accumulate.accumulate(fields, gk.METRIC_ROWS, hist, acc, bins, gk.SUB_CHUNK)
             if tick and clock is not None:
                 t4 = tick()
                 for stage, spent in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3),
