@@ -322,22 +322,18 @@ class GroundSystem:
         acc = accumulate.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
         tick = time.thread_time if clock is not None else None
-        # The whole block is drawn at once (each source's generator gives the same numbers in
-        # one call as in several), then solved and reduced SOLVE_CHUNK trials at a time; the
-        # statistics are merged SUB_CHUNK trials at a time whatever SOLVE_CHUNK is.
-        t0 = tick() if tick else 0.0
-        true, block_rows, affine = self.unit_draws(p, streams, first_trial, n, _draw_buffers(n))
-        fixed = all(isinstance(a, float) for a in true)
-        block_C = mounting_matrix(*true).reshape(9) if fixed else \
-            np.ascontiguousarray(mounting_matrix(*true).reshape(n, 9).T)
-        if tick and clock is not None:
-            clock["draws"] = clock.get("draws", 0.0) + tick() - t0
+        # Drawn, solved and reduced to metrics SOLVE_CHUNK trials at a time (a source's
+        # generator gives the same numbers in one call as in several); the statistics are
+        # merged every SUB_CHUNK trials whatever SOLVE_CHUNK is, so they do not depend on it.
         for s in range(0, n, gk.SOLVE_CHUNK):
             t0 = tick() if tick else 0.0
             m = min(gk.SOLVE_CHUNK, n - s)
             flags, fields, bins, out_rows = _scratch(m)
-            rows = [r[s:s + m] for r in block_rows]
-            C = block_C if fixed else block_C[:, s:s + m]
+            true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
+                                                 _draw_buffers(m))
+            fixed = all(isinstance(a, float) for a in true)
+            C = mounting_matrix(*true).reshape(9) if fixed else \
+                np.ascontiguousarray(mounting_matrix(*true).reshape(m, 9).T)
             t1 = tick() if tick else 0.0
             gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,
                            cam.n_z / 2.0, rows, affine, flags, fields, out_rows)

@@ -212,7 +212,7 @@ def format_roofline(r: dict[str, Any]) -> list[str]:
     """The roofline table of :func:`ground_roofline`."""
     total = r["total_ns_per_trial"]
     lines = [f"roofline of the fused ground path, one core, CPU time ({r['trials']:,} trials "
-             f"drawn by blocks, solved in chunks of {r['sub_chunk']:,}); "
+             f"in chunks of {r['sub_chunk']:,}); "
              "fraction = ceiling / stage:",
              f"  {'stage':<13}{'ns/trial':>9}{'share':>7}  {'ceiling ns/trial':>16}"
              f"{'fraction':>9}  ceiling"]
