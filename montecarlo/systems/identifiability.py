@@ -119,3 +119,53 @@ def mib_multiple(system: str, design: Mapping[str, Any], effect: str,
         else:
             lo = mid
     return hi, seen
+
+
+def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARGET,
+             sets: int = 100, seed: int = 0, n_jobs: int | None = 1) -> dict[str, Any]:
+    """Add ``pci``, ``pci_size``, ``mib``, ``mib_mdb`` to each testable base-model candidate of
+    a diagnosis's JSON ``report`` (:func:`montecarlo.discrepancy.view.to_json`), on the data's
+    own design: its layout, noise and final model (``view.study_params(d.after)``).
+
+    ``pci`` is at the fitted size for a named effect (``pci_size`` "fitted"), at its MDB for
+    the others ("1 MDB"); ``mib`` is ``mib_mdb`` times the candidate's MDB (display units, as
+    ``mdb``), ``None`` where no multiple up to :data:`MULTIPLE_RANGE` reaches ``target``.
+    """
+    design = view.study_params(d.after)
+    system = view.study_system
+    for c in report["candidates"]:
+        if c["status"] != "testable":
+            continue
+        name = c["name"]
+        parameters = d.problem.effect(name).parameters
+        size: float | dict[str, float] = 1.0
+        if name in d.named:
+            size = {p: float(d.after.params[p]) for p in parameters}
+        m, _ = mib_multiple(system, design, name, target, sets, seed, n_jobs,
+                            parameters=parameters)
+        (c["pci"],) = pci(system, design, name, [size], sets, seed, n_jobs, parameters)
+        c["pci_size"] = "fitted" if name in d.named else "1 MDB"
+        c["mib_mdb"] = m if math.isfinite(m) else None
+        c["mib"] = ({k: m * v for k, v in c["mdb"].items()} if math.isfinite(m) else None)
+    report["identifiability"] = {"pci_target": target, "sets": sets, "seed": seed,
+                                 "search": "bisection on the multiple of the MDB, common "
+                                           "random numbers, relative width 0.02"}
+    return report
+
+
+def format_table(report: Mapping[str, Any]) -> str:
+    """The candidates' MDB, MIB and PCI as text lines."""
+    info = report["identifiability"]
+    lines = [f"identifiability ({info['sets']} simulated sets per size, MIB at PCI "
+             f"{info['pci_target']:.2f}):",
+             f"  {'candidate':<24} {'MDB':<28} {'MIB':<34} PCI"]
+    for c in report["candidates"]:
+        if "pci" not in c:
+            continue
+        mdb = ", ".join(f"{k} {v:.3g}" for k, v in c["mdb"].items())
+        mib = ("not reached" if c["mib"] is None else
+               ", ".join(f"{k} {v:.3g}" for k, v in c["mib"].items())
+               + f" ({c['mib_mdb']:.2f} MDB)")
+        lines.append(f"  {c['name']:<24} {mdb:<28} {mib:<34} {c['pci']:.2f} at "
+                     f"{c['pci_size']}")
+    return "\n".join(lines)
