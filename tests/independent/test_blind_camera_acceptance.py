@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import pytest
 
+from montecarlo.camera_calibration.calibrate import calibrate
+
 from . import blind_camera_acceptance as bca
 
 
@@ -29,6 +31,25 @@ def test_reader_takes_the_generators_millimetres():
     assert truth["target"]["unit"] == "mm"
     assert sorted(set(data.points[:, 0].round(12))) == pytest.approx(
         [k * pitch_m for k in range(5)], abs=1e-12)
+
+
+def test_our_model_reproduces_the_blind_camera():
+    """Noise-free blind views (fx 600, fy 606, skew 0.4 px, principal point at the image
+    centre (319.5, 239.5) with pixel centres at integers, k1 -0.2, k2 0.05, p1 0.001,
+    p2 -0.0015; 6 x 6 target in mm) through the CSV files: our calibration with k1, k2, p1,
+    p2, skew and aspect returns the generator's camera to round-off (f = fx, a = fy/fx - 1,
+    gamma = skew): the two forward models are the same, pixel origin included."""
+    truth = dict(fx=600.0, fy=606.0, skew=0.4, k1=-0.2, k2=0.05, p1=0.001, p2=-0.0015)
+    data, _ = bca.blind_data(5, 0.0, grid=6, **truth)
+    cal = calibrate(data.points, data.pixels, data.view, len(data.views),
+                    ("k1", "k2", "p1", "p2"), skew=True, aspect=True, sigma=0.2)
+    p = cal.params
+    assert p["f"] == pytest.approx(600.0, abs=1e-8)
+    assert p["a"] == pytest.approx(606.0 / 600.0 - 1.0, abs=1e-12)
+    assert p["gamma"] == pytest.approx(0.4, abs=1e-8)
+    assert (p["cx"], p["cy"]) == pytest.approx((319.5, 239.5), abs=1e-8)
+    for k in ("k1", "k2", "p1", "p2"):
+        assert p[k] == pytest.approx(truth[k], abs=1e-10)
 
 
 @pytest.mark.slow
