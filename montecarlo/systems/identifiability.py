@@ -130,6 +130,8 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
     ``pci`` is at the fitted size for a named effect (``pci_size`` "fitted"), at its MDB for
     the others ("1 MDB"); ``mib`` is ``mib_mdb`` times the candidate's MDB (display units, as
     ``mdb``), ``None`` where no multiple up to :data:`MULTIPLE_RANGE` reaches ``target``.
+    A candidate that cannot be injected given the final model's effects (absorbed or
+    undetectable there) gets ``pci``, ``mib`` ``None`` and ``identifiability_reason``.
     """
     design = view.study_params(d.after)
     system = view.study_system
@@ -141,10 +143,14 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
         size: float | dict[str, float] = 1.0
         if name in d.named:
             size = {p: float(d.after.params[p]) for p in parameters}
-        m, _ = mib_multiple(system, design, name, target, sets, seed, n_jobs,
-                            parameters=parameters)
-        (c["pci"],) = pci(system, design, name, [size], sets, seed, n_jobs, parameters)
         c["pci_size"] = "fitted" if name in d.named else "1 MDB"
+        try:
+            m, _ = mib_multiple(system, design, name, target, sets, seed, n_jobs,
+                                parameters=parameters)
+            (c["pci"],) = pci(system, design, name, [size], sets, seed, n_jobs, parameters)
+        except ValueError as exc:  # not injectable given the final model's effects
+            c.update(pci=None, mib=None, mib_mdb=None, identifiability_reason=str(exc))
+            continue
         c["mib_mdb"] = m if math.isfinite(m) else None
         c["mib"] = ({k: m * v for k, v in c["mdb"].items()} if math.isfinite(m) else None)
     report["identifiability"] = {"pci_target": target, "sets": sets, "seed": seed,
@@ -166,6 +172,9 @@ def format_table(report: Mapping[str, Any]) -> str:
         mib = ("not reached" if c["mib"] is None else
                ", ".join(f"{k} {v:.3g}" for k, v in c["mib"].items())
                + f" ({c['mib_mdb']:.2f} MDB)")
+        if c["pci"] is None:
+            lines.append(f"  {c['name']:<24} {mdb:<28} {c['identifiability_reason']}")
+            continue
         lines.append(f"  {c['name']:<24} {mdb:<28} {mib:<34} {c['pci']:.2f} at "
                      f"{c['pci_size']}")
     return "\n".join(lines)
