@@ -14,7 +14,8 @@ the DIA engine; the PCI is the share of sets in which the candidate is among the
 (``named_expected``). Every evaluation is one :func:`montecarlo.engine.runner.run_study` with
 the same seed, so every size sees the same noise (common random numbers): the simulated PCI
 is then a monotone step function of the size in nearly every set, and the MIB is searched by
-bisection on the multiple of the MDB (geometric midpoints, to a relative width ``tol``).
+bisection on the multiple of the MDB (geometric midpoints, to a relative width ``tol``), then
+interpolated in log(multiple) between the bracket's ends.
 """
 
 from __future__ import annotations
@@ -94,9 +95,10 @@ def mib_multiple(system: str, design: Mapping[str, Any], effect: str,
 
     Bracket: start at [1, 2] MDB, double the upper end while its PCI is below ``target``,
     halve the lower end while its PCI reaches it (within :data:`MULTIPLE_RANGE`); then
-    bisect at geometric midpoints until ``upper / lower - 1 <= tol``. Returns the upper end
-    (the smallest multiple seen whose simulated PCI reaches ``target``), ``inf`` if none in
-    the range does. Every evaluation uses ``seed`` (common random numbers).
+    bisect at geometric midpoints until ``upper / lower - 1 <= tol``. Returns the multiple
+    where the PCI, linear in log(multiple) between the bracket's ends, reaches ``target``
+    (the upper end if the lower one already reaches it), ``inf`` if no multiple in the range
+    does. Every evaluation uses ``seed`` (common random numbers).
     """
     seen: dict[float, float] = {}
 
@@ -118,6 +120,10 @@ def mib_multiple(system: str, design: Mapping[str, Any], effect: str,
             hi = mid
         else:
             lo = mid
+    if lo >= MULTIPLE_RANGE[0] and at(lo) < target <= at(hi):
+        # linear in log(multiple) between the bracket's ends
+        w = (target - at(lo)) / (at(hi) - at(lo))
+        return lo * (hi / lo) ** w, seen
     return hi, seen
 
 
