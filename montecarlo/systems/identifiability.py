@@ -161,7 +161,8 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
         c["mib"] = ({k: m * v for k, v in c["mdb"].items()} if math.isfinite(m) else None)
     report["identifiability"] = {"pci_target": target, "sets": sets, "seed": seed,
                                  "search": "bisection on the multiple of the MDB, common "
-                                           "random numbers, relative width 0.02"}
+                                           "random numbers, relative width 0.02, "
+                                           "interpolated in log(multiple)"}
     return report
 
 
@@ -174,10 +175,13 @@ def format_table(report: Mapping[str, Any]) -> str:
     for c in report["candidates"]:
         if "pci" not in c:
             continue
-        mdb = ", ".join(f"{k} {v:.3g}" for k, v in c["mdb"].items())
+        def show(values: Mapping[str, float], c: Mapping[str, Any] = c) -> str:
+            return ", ".join(f"{k} {v:.3g}" + ("" if c["units"][k] == "1" else
+                                               f" {c['units'][k]}") for k, v in values.items())
+
+        mdb = show(c["mdb"])
         mib = ("not reached" if c["mib"] is None else
-               ", ".join(f"{k} {v:.3g}" for k, v in c["mib"].items())
-               + f" ({c['mib_mdb']:.2f} MDB)")
+               show(c["mib"]) + f" ({c['mib_mdb']:.2f} MDB)")
         if c["pci"] is None:
             lines.append(f"  {c['name']:<24} {mdb:<28} {c['identifiability_reason']}")
             continue
