@@ -457,7 +457,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         p.add_argument("--trials", type=nonnegative_int, default=200,
                        help="Monte Carlo data sets per model in --report (default 200; 0: none)")
         p.add_argument("--seed", type=nonnegative_int, default=0,
-                       help="seed of the --report Monte Carlo (default 0)")
+                       help="seed of the --report and --identifiability Monte Carlo (default 0)")
         p.add_argument("--identifiability", action="store_true",
                        help="also the PCI and the MIB of each candidate, by Monte Carlo on "
                        "the data's design (costly: about 10 x --sets diagnoses a candidate)")
