@@ -54,8 +54,8 @@ def test_our_model_reproduces_the_blind_camera():
 
 @pytest.mark.slow
 def test_blind_acceptance():
-    """50 sets per scenario, 6 x 6 target, 0.2 px, 3 MDB (docs/camera.md has the figures)."""
-    table = bca.run(50, grid=6, n_jobs=2)
+    """100 sets per scenario, 6 x 6 target, 0.2 px, 3 MDB (docs/camera.md has the figures)."""
+    table = bca.run(100, grid=6, n_jobs=2)
     assert table["radial"]["right_named"] >= 0.95
     assert table["tangential"]["right_named"] >= 0.95
     assert table["null"]["anything_named"] <= 0.02
