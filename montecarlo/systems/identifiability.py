@@ -135,7 +135,10 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
 
     ``pci`` is at the fitted size for a named effect (``pci_size`` "fitted"), at its MDB for
     the others ("1 MDB"); ``mib`` is ``mib_mdb`` times the candidate's MDB (display units, as
-    ``mdb``), ``None`` where no multiple up to :data:`MULTIPLE_RANGE` reaches ``target``.
+    ``mdb``): its MDB given the final model where it is testable there (``mib_of`` "final
+    model MDB", the context of the injection), else its base-model MDB ("base model MDB",
+    e.g. a named effect when others are named too: then approximate); ``None`` where no
+    multiple up to :data:`MULTIPLE_RANGE` reaches ``target``.
     A candidate that cannot be injected given the final model's effects (absorbed or
     undetectable there) gets ``pci``, ``mib`` ``None`` and ``identifiability_reason``.
     """
@@ -157,8 +160,12 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
         except ValueError as exc:  # not injectable given the final model's effects
             c.update(pci=None, mib=None, mib_mdb=None, identifiability_reason=str(exc))
             continue
+        after = next((a for a in report.get("candidates_after", ())
+                      if a["name"] == name and a["status"] == "testable" and a["mdb"]), None)
+        reference = c["mdb"] if after is None else after["mdb"]
         c["mib_mdb"] = m if math.isfinite(m) else None
-        c["mib"] = ({k: m * v for k, v in c["mdb"].items()} if math.isfinite(m) else None)
+        c["mib_of"] = "base model MDB" if after is None else "final model MDB"
+        c["mib"] = ({k: m * v for k, v in reference.items()} if math.isfinite(m) else None)
     report["identifiability"] = {"pci_target": target, "sets": sets, "seed": seed,
                                  "search": "bisection on the multiple of the MDB, common "
                                            "random numbers, relative width 0.02, "
@@ -181,7 +188,7 @@ def format_table(report: Mapping[str, Any]) -> str:
 
         mdb = show(c["mdb"])
         mib = ("not reached" if c["mib"] is None else
-               show(c["mib"]) + f" ({c['mib_mdb']:.2f} MDB)")
+               show(c["mib"]) + f" ({c['mib_mdb']:.2f} x {c['mib_of']})")
         if c["pci"] is None:
             lines.append(f"  {c['name']:<24} {mdb:<28} {c['identifiability_reason']}")
             continue
