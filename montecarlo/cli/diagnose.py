@@ -63,6 +63,11 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
 
     report = to_json(d, view, source)
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
+    if getattr(args, "identifiability", False):
+        from montecarlo.systems import identifiability
+
+        identifiability.annotate(report, d, view, args.pci_target, args.sets, args.seed,
+                                 args.n_jobs)
     if args.report:
         from montecarlo.output.diagnosis import (  # matplotlib: only for reports
             write_html_report,
@@ -83,6 +88,10 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
         steps.report(to_stderr=True)
         return 0
     print(format_text(report))
+    if "identifiability" in report:
+        from montecarlo.systems.identifiability import format_table
+
+        print(format_table(report))
     if args.report:
         print(f"report written to {args.report}/ (report.md, report.html, diagnosis.json, "
               "residuals.png, gap.png)")
@@ -395,7 +404,14 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         p.add_argument("--trials", type=nonnegative_int, default=200,
                        help="Monte Carlo data sets per model in --report (default 200; 0: none)")
         p.add_argument("--seed", type=nonnegative_int, default=0,
-                       help="seed of the --report Monte Carlo (default 0)")
+                       help="seed of the --report and --identifiability Monte Carlo (default 0)")
+        p.add_argument("--identifiability", action="store_true",
+                       help="also the PCI and the MIB of each candidate, by Monte Carlo on "
+                       "the data's design (costly: about 10 x --sets diagnoses a candidate)")
+        p.add_argument("--pci-target", type=probability, default=0.8,
+                       help="PCI at which the MIB is stated (default 0.8)")
+        p.add_argument("--sets", type=positive_int, default=100,
+                       help="simulated data sets per size for --identifiability (default 100)")
         add_n_jobs_option(p)
 
     p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")
