@@ -199,3 +199,32 @@ def test_kalman_source_draws_from_the_filter_covariance():
 def test_bad_params_raise_input_error(params, match):
     with pytest.raises(InputError, match=match):
         air.run_trials(params, np.random.default_rng(0), 3)
+
+
+def test_level_error_combines_east_with_north():
+    """``level_error`` is the tilt of the slave's level plane, ``hypot(φ_E, φ_N)``, never a
+    combination with the heading axis φ_U.
+
+    By hand, with no installation or master error the error matrix D is the rotation φ_ta
+    turned into product axes, so its angle is ``|φ_ta|``: per trial
+    ``level² + heading² = φ_E² + φ_N² + φ_U² = rotation_angle²`` (``hypot(φ_E, φ_U)`` would
+    give ``φ_E² + 2 φ_U²``). Limits: heading alone (level 0) gives a level error of exactly 0;
+    level alone (heading 0) gives ``level_error = rotation_angle``. Spread: level 5′ read as the
+    RSS of two axes of 5′/√2 has ``E[level²] = 25 arcmin²``; ``Σ level²/(12.5 arcmin²)`` is
+    χ² with 2n degrees of freedom.
+    """
+    from scipy import stats
+    n = 4000
+    base = {"install_bound": 0.0, "mount_psi": 0.7, "mount_theta": -0.4, "mount_gamma": 1.1}
+    out = air.run_trials(base, np.random.default_rng(24), n)
+    np.testing.assert_allclose(out["level_error"] ** 2 + out["heading_error"] ** 2,
+                               out["rotation_angle"] ** 2, rtol=1e-7)
+    heading_only = air.run_trials({**base, "level_sigma": 0.0}, np.random.default_rng(25), n)
+    np.testing.assert_array_equal(heading_only["level_error"], 0.0)
+    assert np.all(heading_only["rotation_angle"] > 0.0)
+    level_only = air.run_trials({**base, "heading_sigma": 0.0}, np.random.default_rng(26), n)
+    np.testing.assert_allclose(level_only["level_error"], level_only["rotation_angle"],
+                               rtol=1e-7)
+    per_axis_var = (5.0 * ARCMIN) ** 2 / 2.0
+    lo, hi = stats.chi2.ppf([1e-6, 1.0 - 1e-6], 2 * n)
+    assert lo < np.sum(out["level_error"] ** 2) / per_axis_var < hi
