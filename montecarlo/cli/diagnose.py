@@ -147,13 +147,48 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
                      str(args.data))
+    check = ste.convention_check(record, camera, args.image_noise_px, gyro_noise, args.mount,
+                                 args.gyro_sampling, d.before, args.alpha)
+    report["conventions"] = _conventions_json(check)
     record_args = {"input": str(args.data), "alpha": args.alpha, "mount": args.mount,
                    "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
                    "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
         return 0
     print(format_text(report))
+    for line in _conventions_text(report["conventions"]):
+        print(line)
     return 0
+
+
+def _conventions_json(check: dict) -> dict:
+    """The convention check of a stabilisation diagnosis with its angles in degrees."""
+    def degrees(angles: dict) -> dict:
+        return {k: math.degrees(v) for k, v in angles.items()}
+
+    return {"checked": check["checked"], "large_angles_deg": degrees(check["large_angles"]),
+            "named": check["named"],
+            "fits": {c: {"chi2_red": f["chi2_red"], "p_value": f["p_value"],
+                         "large_angles_deg": degrees(f["large_angles"])}
+                     for c, f in check["fits"].items()}}
+
+
+def _conventions_text(conventions: dict) -> list[str]:
+    from montecarlo.discrepancy.stabilization_effects import CONVENTIONS
+
+    lines = []
+    if conventions["large_angles_deg"]:
+        angles = ", ".join(f"{k} = {v:.1f} deg" for k, v in conventions["large_angles_deg"].items())
+        lines.append(f"installation angles not small ({angles}): the recording's frames or signs "
+                     "differ from the model's (docs/stabilization.md, 'Conventions of the "
+                     "recordings')")
+    for column in conventions["named"]:
+        lines.append(f"convention: the model fits with {column} negated: the recording has "
+                     f"{CONVENTIONS[column]}")
+    if conventions["checked"] and not conventions["named"]:
+        lines.append("convention: no single sign change of eta, eps or an image axis makes the "
+                     "model fit")
+    return lines
 
 
 def _diagnose_procedure(args: argparse.Namespace, sigma: float) -> int:
