@@ -72,11 +72,11 @@ def test_error_matrix_of_a_batch_against_scipy():
     np.testing.assert_allclose(metrics.error_matrix(C_bc, C_ba), expected, atol=1e-14)
 
 
-def test_a_trace_an_ulp_outside_minus_one_to_three_gives_the_end_values():
-    """Round-off can put tr D an ulp above 3 (no rotation) or below -1 (a half turn). The
+def test_a_trace_a_few_ulps_outside_minus_one_to_three_gives_the_end_values():
+    """Round-off can put tr D a few ulps above 3 (no rotation) or below -1 (a half turn). The
     metrics then take their end values, never NaN: eq. (18) 0 and pi/2, Table 1's 0 and
     arccos(-ulp/4) = pi/2, the rotation angle 0 and pi."""
-    above = np.diag([1.0 + 2.0**-51, 1.0, 1.0])
+    above = np.diag([1.0 + 2.0**-51] * 3)  # each diagonal element 2 ulps above 1
     below = np.diag([1.0, -1.0 - 2.0**-52, -1.0])
     assert np.trace(above) > 3.0 and np.trace(below) < -1.0
     assert metrics.eq18_angle(above) == 0.0 and metrics.table1_angle(above) == 0.0
