@@ -293,7 +293,9 @@ def test_summaries_rss_and_single_rotations_by_hand():
 def test_reproduction_table_columns_units_and_seeding():
     """The table's columns; values in mrad (the rms rotation angle of the RSS reading is near
     1.70 mrad, 2 % at 4000 trials covers its 0.9 % standard error several times); the paper's
-    figures 1.70 and 5.10 mrad; an integer seed and a Generator seeded alike give one table."""
+    figures 1.70 mrad beside rms and p68, 5.10 beside p99.7 and 3rms; an integer seed and a
+    Generator seeded alike give one table; the consistent readings carry the table's values,
+    and an empty selection still has its columns."""
     table = air.reproduce_paper(n=4000, rng=5)
     assert list(table.columns) == ["scenario", "description", "metric", "statistic",
                                    "value_mrad", "paper_mrad", "deviation", "trials"]
@@ -302,10 +304,24 @@ def test_reproduction_table_columns_units_and_seeding():
     assert rms.value_mrad.iloc[0] == pytest.approx(1.70, rel=0.02)
     assert set(table.paper_mrad.dropna().round(2)) == {1.70, 5.10}
     assert list(table.scenario.unique()) == list(air.SCENARIOS)
-    again = air.reproduce_paper(n=4000, rng=np.random.default_rng(5).integers(2**63))
-    other = air.reproduce_paper(n=4000, rng=np.random.default_rng(5))
+    again = air.reproduce_paper(n=300, rng=np.random.default_rng(5).integers(2**63))
+    other = air.reproduce_paper(n=300, rng=np.random.default_rng(5))
     pd.testing.assert_frame_equal(again, other)
+    rot = table[table.metric == "rotation_angle"]
+    np.testing.assert_array_equal(rot[rot.statistic.isin(["rms", "p68"])].paper_mrad.round(2),
+                                  1.70)
+    np.testing.assert_array_equal(rot[rot.statistic.isin(["p99.7", "3rms"])].paper_mrad
+                                  .round(2), 5.10)
+    columns = ["scenario", "metric", "one_sigma", "one_sigma_mrad", "one_sigma_dev",
+               "three_sigma", "three_sigma_mrad", "three_sigma_dev"]
     pairs = air.consistent_readings(table)
-    assert list(pairs.columns) == ["scenario", "metric", "one_sigma", "one_sigma_mrad",
-                                   "one_sigma_dev", "three_sigma", "three_sigma_mrad",
-                                   "three_sigma_dev"]
+    assert list(pairs.columns) == columns and len(pairs) > 0 and not pairs.isna().any().any()
+    first = pairs.iloc[0]
+    for stat, key in ((first.one_sigma, "one_sigma"), (first.three_sigma, "three_sigma")):
+        row = table[(table.scenario == first.scenario) & (table.metric == first.metric)
+                    & (table.statistic == stat)].iloc[0]
+        assert first[f"{key}_mrad"] == row.value_mrad and first[f"{key}_dev"] == row.deviation
+    assert list(air.consistent_readings(table, tolerance=0.0).columns) == columns
+    close = air.matches(table, 0.02)
+    assert (close.deviation.abs() <= 0.02).all() and rms.index[0] in close.index
+    assert len(air.matches(table, 0.0)) == 0
