@@ -322,6 +322,6 @@ def test_reproduction_table_columns_units_and_seeding():
                     & (table.statistic == stat)].iloc[0]
         assert first[f"{key}_mrad"] == row.value_mrad and first[f"{key}_dev"] == row.deviation
     assert list(air.consistent_readings(table, tolerance=0.0).columns) == columns
-    close = air.matches(table, 0.02)
+    close = air.matches(table)  # the default tolerance is 2 %
     assert (close.deviation.abs() <= 0.02).all() and rms.index[0] in close.index
     assert len(air.matches(table, 0.0)) == 0
