@@ -144,3 +144,18 @@ def test_simulate_reports_forward_reasons_first():
 def test_simulate_rejects_unknown_solver():
     with pytest.raises(ValueError, match="unknown solver"):
         ground.simulate(CAMERA, TRUE, 50.0, 1.0, solvers=("raw", "fancy"))
+
+
+def test_equivalent_angles_by_hand_and_nan_behind_the_focal_plane():
+    """Identity mounting, by hand: (-1, 1, 0) is seen at psi = arctan(1) = pi/4, theta = 0;
+    (0, 3, 4) at psi = 0, theta = arcsin(4/5) = 0.92729522. A target in the focal plane
+    (y = 0), behind it, or at the focus itself has float NaN angles and is not in front,
+    silently (the test run turns warnings into errors)."""
+    r_b = np.array([[-1.0, 1.0, 0.0], [0.0, 3.0, 4.0], [1.0, 0.0, 0.0], [0.0, -5.0, 1.0],
+                    [0.0, 0.0, 0.0]])
+    psi, theta, front = ground.equivalent_angles_of_target(np.eye(3), r_b)
+    assert psi.dtype == theta.dtype == np.float64
+    np.testing.assert_array_equal(front, [True, True, False, False, False])
+    np.testing.assert_allclose(psi[:2], [np.pi / 4, 0.0], atol=1e-15)
+    np.testing.assert_allclose(theta[:2], [0.0, 0.92729522], atol=1e-8)
+    assert np.isnan(psi[2:]).all() and np.isnan(theta[2:]).all()
