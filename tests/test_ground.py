@@ -183,6 +183,7 @@ def test_solver_broadcasts_every_input_and_normalises_by_default():
                       (pix_a[i], pix_b[i], L[i], np.full(4, H[i]))):
             sol = ground.solve_mounting(*batch, CAMERA)
             assert sol.psi.shape == sol.invalid.shape == (4,)
+            assert sol.invalid.dtype == np.uint16  # the flags are counted with bincount
             np.testing.assert_allclose(sol.psi[i], one.psi, atol=1e-12)
     raw = ground.solve_mounting(pix_a + 0.3, pix_b + 0.3, L, H, CAMERA, normalise=False)
     norm = ground.solve_mounting(pix_a + 0.3, pix_b + 0.3, L, H, CAMERA, normalise=True)
