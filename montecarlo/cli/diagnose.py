@@ -27,6 +27,7 @@ from montecarlo.cli.common import (
     write_provenance,
     write_text,
 )
+from montecarlo.cli.stabilization import conventions_json, conventions_text
 from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
@@ -196,6 +197,9 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
                      str(args.data))
+    check = ste.convention_check(record, camera, args.image_noise_px, gyro_noise, args.mount,
+                                 args.gyro_sampling, d.before, args.alpha)
+    report["conventions"] = conventions_json(check)
     record_args = {"input": str(args.data), "alpha": args.alpha, "mount": args.mount,
                    "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
                    "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
@@ -203,6 +207,8 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         steps.report(to_stderr=True)
         return 0
     print(format_text(report))
+    for line in conventions_text(report["conventions"]):
+        print(line)
     steps.report(to_stderr=False)
     return 0
 
