@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all lint nightly bench bench-full clean
+.PHONY: install run test test-all lint nightly bench bench-full mutation clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -31,6 +31,10 @@ bench: install
 
 bench-full: install
 	$(BIN)/montecarlo bench --full
+
+# one module or folder: make mutation MODULE=montecarlo/seed000/air.py (docs/testing.md)
+mutation: install
+	PYTHON_BIN=$(BIN)/python .ci/mutation $(MODULE)
 
 lint: install
 	$(BIN)/ruff check .

@@ -1,6 +1,7 @@
 """Air dynamic calibration, seed 000 section 2: eq. (19), error model, 1.70 / 5.10 mrad."""
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
@@ -199,3 +200,128 @@ def test_kalman_source_draws_from_the_filter_covariance():
 def test_bad_params_raise_input_error(params, match):
     with pytest.raises(InputError, match=match):
         air.run_trials(params, np.random.default_rng(0), 3)
+
+
+def test_level_error_combines_east_with_north():
+    """``level_error`` is the tilt of the slave's level plane, ``hypot(φ_E, φ_N)``, never a
+    combination with the heading axis φ_U.
+
+    By hand, with no installation or master error the error matrix D is the rotation φ_ta
+    turned into product axes, so its angle is ``|φ_ta|``: per trial
+    ``level² + heading² = φ_E² + φ_N² + φ_U² = rotation_angle²`` (``hypot(φ_E, φ_U)`` would
+    give ``φ_E² + 2 φ_U²``). Limits: heading alone (level 0) gives a level error of exactly 0;
+    level alone (heading 0) gives ``level_error = rotation_angle``. Spread: level 5′ read as the
+    RSS of two axes of 5′/√2 has ``E[level²] = 25 arcmin²``; ``Σ level²/(12.5 arcmin²)`` is
+    χ² with 2n degrees of freedom.
+    """
+    from scipy import stats
+    n = 4000
+    base = {"install_bound": 0.0, "mount_psi": 0.7, "mount_theta": -0.4, "mount_gamma": 1.1}
+    out = air.run_trials(base, np.random.default_rng(24), n)
+    np.testing.assert_allclose(out["level_error"] ** 2 + out["heading_error"] ** 2,
+                               out["rotation_angle"] ** 2, rtol=1e-7)
+    heading_only = air.run_trials({**base, "level_sigma": 0.0}, np.random.default_rng(25), n)
+    np.testing.assert_array_equal(heading_only["level_error"], 0.0)
+    assert np.all(heading_only["rotation_angle"] > 0.0)
+    level_only = air.run_trials({**base, "heading_sigma": 0.0}, np.random.default_rng(26), n)
+    np.testing.assert_allclose(level_only["level_error"], level_only["rotation_angle"],
+                               rtol=1e-7)
+    per_axis_var = (5.0 * ARCMIN) ** 2 / 2.0
+    lo, hi = stats.chi2.ppf([1e-6, 1.0 - 1e-6], 2 * n)
+    assert lo < np.sum(out["level_error"] ** 2) / per_axis_var < hi
+
+
+def test_the_master_error_is_shared_by_default():
+    """By default the slave inherits the whole master error (shared = 1), so it cancels:
+    eq. (19) returns the true mounting exactly."""
+    C_ba, C_gbf = mounting_matrix(*ANGLES), _random_passive(5)
+    phi_m = np.array([2e-3, -1e-3, 3e-3])
+    C_bc = air.computed_mounting(C_ba, C_gbf, np.zeros(3), np.zeros(3), phi_m)
+    np.testing.assert_allclose(C_bc, np.broadcast_to(C_ba, C_bc.shape), atol=1e-14)
+
+
+def test_run_trials_draws_an_unshared_master_error_per_trial():
+    """Master heading error 2′ alone, not shared (0), no other error: each trial's rotation
+    angle is the magnitude of its own master draw, so the angles differ between trials and
+    Σφ²/(2′)² is χ² with n dof."""
+    from scipy import stats
+    n = 2000
+    out = air.run_trials({"heading_sigma": 0.0, "level_sigma": 0.0, "install_bound": 0.0,
+                          "master_heading_sigma": 2 * ARCMIN, "master_error_shared": 0.0},
+                         np.random.default_rng(31), n)
+    assert np.unique(out["rotation_angle"]).size == n
+    lo, hi = stats.chi2.ppf([1e-6, 1 - 1e-6], n)
+    assert lo < np.sum(out["rotation_angle"] ** 2) / (2 * ARCMIN) ** 2 < hi
+
+
+def test_table2_rows_are_matched_to_one_part_in_a_million():
+    """A grade 5e-6 off a Table 2 row (in either figure) or 2 % off the gyro drift (5e-9 rad/s,
+    below numpy's default absolute tolerance) is not a Table 2 grade; the message lists the
+    five grades."""
+    row = t2.TABLE2_ROWS[2]
+    assert air.table2_row(row.gyro_drift * (1 + 5e-7), row.accel_bias) == row
+    for drift, bias in ((row.gyro_drift * (1 + 5e-6), row.accel_bias),
+                        (row.gyro_drift, row.accel_bias * (1 + 5e-6)),
+                        (row.gyro_drift * 1.02, row.accel_bias),
+                        (row.gyro_drift, 3.0 * row.accel_bias)):
+        with pytest.raises(InputError, match=r"\(0\.05 °/h, 0\.0005 g\), \(0\.05 °/h, 0\.0001 g\)"):
+            air.table2_row(drift, bias)
+
+
+def test_unknown_parameters_are_all_named():
+    with pytest.raises(InputError, match=r"parameter\(s\): heading, levle$"):
+        air.run_trials({"levle": 1.0, "heading": 2.0}, np.random.default_rng(0), 1)
+
+
+def test_summaries_rss_and_single_rotations_by_hand():
+    """summarise of 0, 1, ..., 10000: rms sqrt(mean k²) = 5773.79, p68 = 6827, p99.7 = 9973
+    (linear interpolation); rss of 3, 4, 12 is 13; one D with level 5′ on each of two axes
+    and heading 3′ has φ = sqrt(3² + 5² + 5²)′ = 7.681′ (the default is one level axis:
+    sqrt(34)′)."""
+    s = air.summarise(np.arange(10001.0))
+    assert s["p68"] == pytest.approx(6827.0, abs=1e-9)
+    assert s["p99.7"] == pytest.approx(9973.0, abs=1e-9)
+    assert s["rms"] == pytest.approx(np.sqrt(np.mean(np.arange(10001.0) ** 2)), rel=1e-12)
+    assert s["3rms"] == pytest.approx(3 * s["rms"], rel=1e-12)
+    assert air.rss_of_inputs(3.0, 4.0, 12.0) == pytest.approx(13.0, rel=1e-15)
+    assert air.one_sigma_rotation(2)["rotation_angle"] == pytest.approx(
+        np.sqrt(59.0) * ARCMIN, rel=1e-9)
+    assert air.one_sigma_rotation()["rotation_angle"] == pytest.approx(np.sqrt(34.0) * ARCMIN,
+                                                                       rel=1e-9)
+
+
+def test_reproduction_table_columns_units_and_seeding():
+    """The table's columns; values in mrad (the rms rotation angle of the RSS reading is near
+    1.70 mrad, 2 % at 4000 trials covers its 0.9 % standard error several times); the paper's
+    figures 1.70 mrad beside rms and p68, 5.10 beside p99.7 and 3rms; an integer seed and a
+    Generator seeded alike give one table; the consistent readings carry the table's values,
+    and an empty selection still has its columns."""
+    table = air.reproduce_paper(n=4000, rng=5)
+    assert list(table.columns) == ["scenario", "description", "metric", "statistic",
+                                   "value_mrad", "paper_mrad", "deviation", "trials"]
+    assert (table.trials == 4000).all()
+    rms = table.query("scenario == 'rss' and metric == 'rotation_angle' and statistic == 'rms'")
+    assert rms.value_mrad.iloc[0] == pytest.approx(1.70, rel=0.02)
+    assert set(table.paper_mrad.dropna().round(2)) == {1.70, 5.10}
+    assert list(table.scenario.unique()) == list(air.SCENARIOS)
+    again = air.reproduce_paper(n=300, rng=np.random.default_rng(5).integers(2**63))
+    other = air.reproduce_paper(n=300, rng=np.random.default_rng(5))
+    pd.testing.assert_frame_equal(again, other)
+    rot = table[table.metric == "rotation_angle"]
+    np.testing.assert_array_equal(rot[rot.statistic.isin(["rms", "p68"])].paper_mrad.round(2),
+                                  1.70)
+    np.testing.assert_array_equal(rot[rot.statistic.isin(["p99.7", "3rms"])].paper_mrad
+                                  .round(2), 5.10)
+    columns = ["scenario", "metric", "one_sigma", "one_sigma_mrad", "one_sigma_dev",
+               "three_sigma", "three_sigma_mrad", "three_sigma_dev"]
+    pairs = air.consistent_readings(table)
+    assert list(pairs.columns) == columns and len(pairs) > 0 and not pairs.isna().any().any()
+    first = pairs.iloc[0]
+    for stat, key in ((first.one_sigma, "one_sigma"), (first.three_sigma, "three_sigma")):
+        row = table[(table.scenario == first.scenario) & (table.metric == first.metric)
+                    & (table.statistic == stat)].iloc[0]
+        assert first[f"{key}_mrad"] == row.value_mrad and first[f"{key}_dev"] == row.deviation
+    assert list(air.consistent_readings(table, tolerance=0.0).columns) == columns
+    close = air.matches(table)  # the default tolerance is 2 %
+    assert (close.deviation.abs() <= 0.02).all() and rms.index[0] in close.index
+    assert len(air.matches(table, 0.0)) == 0

@@ -14,14 +14,31 @@ def test_bench_quick_json_has_every_figure():
                           "--repeats", "2"], capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
-    for key in ("naive_trials_per_s", "reference_trials_per_s", "fast_trials_per_s_1core",
-                "fast_trials_per_s_2core", "peak_rss_mb", "stabilization_reference_trials_per_s",
-                "stabilization_fast_trials_per_s"):
-        assert r[key] > 0, key
-    assert r["stabilization_ratio"] == pytest.approx(
-        r["stabilization_fast_trials_per_s"] / r["stabilization_reference_trials_per_s"])
+    rates = ("naive_trials_per_s", "reference_trials_per_s", "fast_trials_per_s_1core",
+             "fast_trials_per_s_2core", "stabilization_reference_trials_per_s",
+             "stabilization_fast_trials_per_s")
+    for key in rates:  # measured: a positive, finite rate (no timing is asserted)
+        assert 0 < r[key] < float("inf"), key
+    # each ratio is the quotient of the figures it names
+    for ratio, top, bottom in (
+            ("ratio_2core_to_naive", "fast_trials_per_s_2core", "naive_trials_per_s"),
+            ("ratio_1core_to_reference", "fast_trials_per_s_1core", "reference_trials_per_s"),
+            ("ratio_2core_to_1core", "fast_trials_per_s_2core", "fast_trials_per_s_1core"),
+            ("stabilization_ratio", "stabilization_fast_trials_per_s",
+             "stabilization_reference_trials_per_s")):
+        assert r[ratio] == pytest.approx(r[top] / r[bottom], rel=1e-12), ratio
+    # (d) is the largest run of the scaling series
     assert [s["trials"] for s in r["scaling"]] == [10**5, 10**6]
+    assert r["fast_trials_per_s_2core"] == r["scaling"][-1]["trials_per_s"]
+    # memory: the polled peak of the 10^6-trial study; a process that imported numpy, pandas
+    # and numba holds more than 50 MB (0 would mean it was never seen running)
+    assert set(r["memory_by_trials"]) == {str(10**6)}
+    big = r["memory_by_trials"][str(r["peak_memory_trials"])]
+    assert r["peak_rss_mb"] == big["max_process_rss_mb"] > 50.0
+    assert big["tree_rss_mb"] >= big["max_process_rss_mb"]
+    assert big["tree_pss_mb"] <= big["tree_rss_mb"]
     assert r["compile_seconds_cold_cache"] is None  # measured by --full only
+    assert len(r["host_probe_atan2_per_s"]) == 2 and min(r["host_probe_atan2_per_s"]) > 0
     stages = r["roofline"]["stages"]
     assert [s["stage"] for s in stages] == ["draws", "solve", "metrics", "accumulation"]
     for s in stages:

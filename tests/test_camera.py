@@ -110,3 +110,44 @@ def test_field_of_view_and_front_checks():
     assert not cam.in_field_of_view(0.0, -128.5, c)
     assert not cam.in_field_of_view(np.nan, 0.0, c)
     assert list(cam.in_front([[0, 1, 0], [0, -1, 0], [1, 0, 0]])) == [True, False, False]
+
+
+def test_focal_plane_point_by_hand_on_a_grid_and_at_the_default_distance():
+    """Eq. (1) by hand for a 90 x 60 deg, 800 x 600 px camera: tan(45°) = 1 and
+    tan(30°) = 0.57735, so pixel (400, 300) (the corner) is at (1, L, 0.57735) L; pixel
+    (-200, 150) at (-0.5, 1, 0.288675) L. The default L is 1 (the focal distance's unit).
+    A grid of pixels (2, 3) gives points of shape (2, 3, 3)."""
+    c = Camera.from_degrees(90.0, 60.0, 800, 600)
+    f_mx = np.array([[400.0, -200.0, 0.0], [0.0, 400.0, -400.0]])
+    f_mz = np.array([[300.0, 150.0, 0.0], [-300.0, 0.0, 300.0]])
+    point = cam.focal_plane_point(f_mx, f_mz, c)
+    assert point.shape == (2, 3, 3)
+    t = np.tan(np.radians(30.0))
+    expected = np.array([[[1.0, 1.0, t], [-0.5, 1.0, t / 2], [0.0, 1.0, 0.0]],
+                         [[0.0, 1.0, -t], [1.0, 1.0, 0.0], [-1.0, 1.0, t]]])
+    np.testing.assert_allclose(point, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_direction_of_equivalent_angles_by_hand_for_a_batch():
+    """R_M'^a = [-sin ψ cos θ, cos ψ cos θ, sin θ]: ψ = 90° points along -x (left), θ = 90°
+    along +z, ψ = θ = 0 along y; a batch of n angles gives (n, 3)."""
+    psi = np.radians([0.0, 90.0, 0.0, 30.0])
+    theta = np.radians([0.0, 0.0, 90.0, 60.0])
+    u = cam.direction_from_equivalent_angles(psi, theta)
+    assert u.shape == (4, 3)
+    expected = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0],
+                [-0.25, np.sqrt(3.0) / 4.0, np.sqrt(3.0) / 2.0]]
+    np.testing.assert_allclose(u, expected, atol=1e-15)
+
+
+def test_camera_values_are_stored_as_floats_and_one_pixel_is_a_camera():
+    """Integer pixel counts and fields of view are stored as Python floats (float arrays for
+    one camera per trial); a single pixel
+    across an axis is a (poor) camera, a count of zero is refused."""
+    c = Camera(1, 1, 1, 640)
+    assert all(type(getattr(c, n)) is float for n in ("fov_yaw", "fov_pitch", "n_x", "n_z"))
+    assert c.k_x == pytest.approx(1.0 / (2.0 * np.tan(0.5)), rel=1e-15)
+    per_trial = Camera(np.array([1, 2]), 1, np.array([512, 640]), 480)
+    assert per_trial.fov_yaw.dtype == per_trial.n_x.dtype == np.float64
+    with pytest.raises(ValueError, match="n_x"):
+        Camera(1, 1, 0, 640)

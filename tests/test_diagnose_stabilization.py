@@ -196,3 +196,15 @@ def test_null_recordings_name_nothing():
                                                sampling))
         named += bool(d.named)
     assert named <= 4
+
+
+def test_large_angles_are_wrapped_before_the_30_degree_limit():
+    """By hand: -720° and 360° + 5° wrap to 0° and 5° (small); 179.6° and -150° stay large;
+    biases and the aim point are not angles."""
+    d = np.pi / 180.0
+    params = {"delta_px": 179.6 * d, "delta_gx": -720.0 * d, "delta_gy": 365.0 * d,
+              "delta_z": -150.0 * d, "delta_py": 29.0 * d, "bias_x": 100.0, "aim_x": 300.0}
+    large = ste.large_angles(params)
+    assert set(large) == {"delta_px", "delta_z"}
+    assert large["delta_px"] == pytest.approx(179.6 * d, abs=1e-12)
+    assert large["delta_z"] == pytest.approx(-150.0 * d, abs=1e-12)

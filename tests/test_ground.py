@@ -144,3 +144,49 @@ def test_simulate_reports_forward_reasons_first():
 def test_simulate_rejects_unknown_solver():
     with pytest.raises(ValueError, match="unknown solver"):
         ground.simulate(CAMERA, TRUE, 50.0, 1.0, solvers=("raw", "fancy"))
+
+
+def test_equivalent_angles_by_hand_and_nan_behind_the_focal_plane():
+    """Identity mounting, by hand: (-1, 1, 0) is seen at psi = arctan(1) = pi/4, theta = 0;
+    (0, 3, 4) at psi = 0, theta = arcsin(4/5) = 0.92729522. A target in the focal plane
+    (y = 0), behind it, or at the focus itself has float NaN angles and is not in front,
+    silently (the test run turns warnings into errors)."""
+    r_b = np.array([[-1.0, 1.0, 0.0], [0.0, 3.0, 4.0], [1.0, 0.0, 0.0], [0.0, -5.0, 1.0],
+                    [0.0, 0.0, 0.0]])
+    psi, theta, front = ground.equivalent_angles_of_target(np.eye(3), r_b)
+    assert psi.dtype == theta.dtype == np.float64
+    np.testing.assert_array_equal(front, [True, True, False, False, False])
+    np.testing.assert_allclose(psi[:2], [np.pi / 4, 0.0], atol=1e-15)
+    np.testing.assert_allclose(theta[:2], [0.0, 0.92729522], atol=1e-8)
+    assert np.isnan(psi[2:]).all() and np.isnan(theta[2:]).all()
+
+
+def test_solver_broadcasts_every_input_and_normalises_by_default():
+    """Exact pixels of four geometries (L 0.9, 50, 100 and 400 m; H 0.2, 2, 3 and 5 m): solving
+    them as one batch whichever single input carries the batch axis, the others scalar, gives
+    each geometry's own solution, which is the true mounting (a range below 1 m is a valid
+    geometry). The default solver is the normalised one (eqs. (12)-(13))."""
+    C = mounting_matrix(*np.radians([30.0, 20.0, 10.0]))
+    L, H = np.array([0.9, 50.0, 100.0, 400.0]), np.array([0.2, 2.0, 3.0, 5.0])
+    pix_a, pix_b = [], []
+    for l_m, h_m in zip(L, H, strict=True):
+        (a, b), _ = ground.observe_target(C, np.array([[0.0, l_m, 0.0], [0.0, l_m, h_m]]),
+                                          CAMERA)
+        pix_a.append(a)
+        pix_b.append(b)
+    pix_a, pix_b = np.array(pix_a), np.array(pix_b)
+    for i in range(4):
+        one = ground.solve_mounting(pix_a[i], pix_b[i], L[i], H[i], CAMERA)
+        np.testing.assert_allclose(one.matrix(), C, atol=1e-9)
+        for batch in ((pix_a, pix_b[i], L[i], H[i]), (pix_a[i], pix_b, L[i], H[i]),
+                      (pix_a[i], pix_b[i], np.full(4, L[i]), H[i]),
+                      (pix_a[i], pix_b[i], L[i], np.full(4, H[i]))):
+            sol = ground.solve_mounting(*batch, CAMERA)
+            assert sol.psi.shape == sol.invalid.shape == (4,)
+            assert sol.invalid.dtype == np.uint16  # the flags are counted with bincount
+            np.testing.assert_allclose(sol.psi[i], one.psi, atol=1e-12)
+    raw = ground.solve_mounting(pix_a + 0.3, pix_b + 0.3, L, H, CAMERA, normalise=False)
+    norm = ground.solve_mounting(pix_a + 0.3, pix_b + 0.3, L, H, CAMERA, normalise=True)
+    default = ground.solve_mounting(pix_a + 0.3, pix_b + 0.3, L, H, CAMERA)
+    np.testing.assert_array_equal(default.psi, norm.psi)
+    assert np.all(default.valid) and not np.array_equal(raw.psi, norm.psi)

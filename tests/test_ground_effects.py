@@ -37,15 +37,28 @@ def moved(layout, positions):
     return GroundData(layout.targets, positions, layout.pixels, layout.t, layout.session)
 
 
-def test_base_model_equals_seed000_trigonometric_route():
-    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (seed000.ground).
+WIDE = Camera.from_degrees(70.0, 40.0, 1600, 900)
+"""A non-square camera: 70 x 40 deg over 1600 x 900 px (k_x and k_z differ)."""
+TILTED = {"psi": np.radians(-25.0), "theta": np.radians(8.0), "gamma": np.radians(-4.0)}
+
+
+@pytest.mark.parametrize(("camera", "mount"), [(CAM, MOUNT), (WIDE, TILTED)])
+def test_base_model_equals_seed000_trigonometric_route(camera, mount):
+    """Base prediction = eq. (4) of the equivalent angles of eq. (10) (seed000.ground), for
+    the square 90 deg camera and a non-square one on another mounting.
 
     Seed 000 has a flat earth and straight rays: k = 1 (a ray bent like the earth) cancels
     the curvature exactly."""
-    C = Rotation.from_euler("ZXY", [MOUNT["psi"], MOUNT["theta"], MOUNT["gamma"]]).as_matrix().T
-    expected, flags = ground.observe_target(C, LAYOUT.positions, CAM)
+    C = Rotation.from_euler("ZXY", [mount["psi"], mount["theta"], mount["gamma"]]).as_matrix().T
+    layout = sd.default_layout(camera, mount)
+    expected, flags = ground.observe_target(C, layout.positions, camera)
     assert not flags.any()
-    np.testing.assert_allclose(predict({}, refraction=1.0), expected, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(ge.predict_pixels(mount, layout, camera, 1.0), expected,
+                               rtol=1e-12, atol=1e-9)
+    # the layout spans most of each half-width (800 and 450 px for the non-square camera)
+    half = np.array([camera.n_x, camera.n_z]) / 2.0
+    assert np.all(np.abs(expected) <= half)
+    assert np.all(np.abs(expected).max(axis=0) > 0.5 * half)
 
 
 def test_layout_is_spread_over_the_field_at_two_ranges():

@@ -141,7 +141,8 @@ def test_runner_fast_path_agrees_with_reference_path(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("relation", ["common", "independent", 0.4])
 def test_block_drawn_in_pieces_equals_block_drawn_at_once(tmp_path, relation):
-    """The fast path draws each block in sub-chunks; the reference path all at once."""
+    """Each source's generator gives the same numbers whether a block is drawn in pieces or
+    at once, which lets the fast path draw whole blocks and solve them in chunks of any size."""
     from montecarlo.engine.distributions import Streams
     from montecarlo.systems import study_from_dict
 
@@ -162,6 +163,40 @@ def test_block_drawn_in_pieces_equals_block_drawn_at_once(tmp_path, relation):
                                                                (4096, 5000)]]
     np.testing.assert_array_equal(np.concatenate([e for _, e in pieces], axis=1), whole)
     np.testing.assert_array_equal(np.concatenate([t[0] for t, _ in pieces]), true[0])
+
+
+@pytest.mark.parametrize("solve_chunk", [8192, 24576])
+def test_fast_path_statistics_do_not_depend_on_the_solve_chunk(monkeypatch, solve_chunk):
+    """Bitwise the same statistics whatever SOLVE_CHUNK (a speed setting) is; they are merged
+    every SUB_CHUNK trials whatever it is."""
+    from montecarlo.engine.distributions import Streams
+    from montecarlo.systems import study_from_dict
+
+    raw = {"study": {"system": "ground", "trials": 1, "seed": 2},
+           "sensor": {"fov_deg": [60.0, 60.0], "pixels": [512, 512]},
+           "mounting": {"psi_deg": {"dist": "normal", "sigma": 3.0}},
+           "geometry": {"L_m": 50.0, "H_m": 1.0},
+           "errors": {"dx_m": {"dist": "uniform", "bound": 0.1},
+                      "dh_m": {"dist": "corners", "bound": 0.002},
+                      "pixel_px": {"dist": "uniform", "bound": 0.5},
+                      "pixel_relation": "independent"}}
+    study = study_from_dict(raw)
+    system, p = study.system, study.points[0].prepared
+
+    def stats() -> agg.PointStats:
+        out = agg.PointStats()
+        for b, (first, n) in enumerate([(0, 65536), (65536, 30000)]):
+            system.accumulate_block(p, Streams(2, 0, b), first, n, b, out)
+        return out
+
+    whole = stats()
+    monkeypatch.setattr(gk, "SOLVE_CHUNK", solve_chunk)
+    cut = stats()
+    assert whole.hist_matrix.tobytes() == cut.hist_matrix.tobytes()
+    assert whole.invalid == cut.invalid
+    for key, m in whole.metrics.items():
+        assert (m.moments(), m.minimum, m.maximum) == \
+            (cut.metrics[key].moments(), cut.metrics[key].minimum, cut.metrics[key].maximum)
 
 
 def test_every_distribution_shape_gives_the_same_statistics_on_both_paths(monkeypatch):

@@ -61,3 +61,26 @@ def test_error_matrix_is_relative_rotation():
 def test_nan_propagates():
     D = np.full((3, 3), np.nan)
     assert all(np.isnan(v) for v in metrics.all_metrics(D).values())
+
+
+def test_error_matrix_of_a_batch_against_scipy():
+    """A batch (n, 3, 3): D = C_b^c (C_b^a)^T, each against scipy's relative rotation
+    (``R_c * R_a.inv()`` for the active rotations whose matrices are the transposes)."""
+    R_a, R_c = Rotation.random(7, random_state=3), Rotation.random(7, random_state=4)
+    C_ba, C_bc = R_a.as_matrix().transpose(0, 2, 1), R_c.as_matrix().transpose(0, 2, 1)
+    expected = (R_c.inv() * R_a).as_matrix()  # C_b^c (C_b^a)^T = R_c^T R_a
+    np.testing.assert_allclose(metrics.error_matrix(C_bc, C_ba), expected, atol=1e-14)
+
+
+def test_a_trace_a_few_ulps_outside_minus_one_to_three_gives_the_end_values():
+    """Round-off can put tr D a few ulps above 3 (no rotation) or below -1 (a half turn). The
+    metrics then take their end values, never NaN: eq. (18) 0 and pi/2, Table 1's 0 and
+    arccos(-ulp/4) = pi/2, the rotation angle 0 and pi."""
+    above = np.diag([1.0 + 2.0**-51] * 3)  # each diagonal element 2 ulps above 1
+    below = np.diag([1.0, -1.0 - 2.0**-52, -1.0])
+    assert np.trace(above) > 3.0 and np.trace(below) < -1.0
+    assert metrics.eq18_angle(above) == 0.0 and metrics.table1_angle(above) == 0.0
+    assert metrics.rotation_angle(above) == 0.0
+    assert metrics.eq18_angle(below) == np.pi / 2
+    assert abs(metrics.table1_angle(below) - np.pi / 2) < 1e-15
+    assert metrics.rotation_angle(below) == np.pi

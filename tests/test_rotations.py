@@ -85,3 +85,22 @@ def test_shapes(shape):
     a = np.zeros(shape)
     assert mounting_matrix(a, a, a).shape == (*shape, 3, 3)
     assert mounting_matrix(np.zeros((4, 1)), np.zeros(3), 0.0).shape == (4, 3, 3, 3)
+
+
+def test_euler_at_a_pitch_of_plus_minus_90_deg_with_c23_an_ulp_beyond_one():
+    """Round-off can put C23 = sin(theta) an ulp beyond +-1: theta is then +-pi/2, not NaN."""
+    for sign in (1.0, -1.0):
+        C = mounting_matrix(0.3, sign * np.pi / 2, -0.2)
+        C[1, 2] = sign * (1.0 + 2.0**-52)
+        assert euler_zxy_from_matrix(C)[1] == sign * np.pi / 2
+
+
+def test_eq14_outside_its_domain_gives_nan_without_a_warning():
+    """C33 = 0 (roll of 90 deg) and C23 = 1 (pitch of 90 deg) divide by zero inside eq. (14):
+    the angles that need the quotient are NaN, silently (the test run turns warnings into
+    errors). By hand: C23 = 0.3 gives theta = arcsin(0.3) = 0.30469265 rad."""
+    psi, theta, gamma = mounting_angles_from_columns(0.5, 0.0, -1.0, 0.3, 0.0)
+    assert np.isnan(gamma) and theta == pytest.approx(0.30469265, abs=1e-8)
+    assert np.isfinite(psi)
+    psi, theta, gamma = mounting_angles_from_columns(0.0, 0.0, 0.0, 1.0, 1.0)
+    assert np.isnan(psi) and theta == np.pi / 2 and gamma == 0.0

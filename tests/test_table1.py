@@ -34,8 +34,21 @@ def test_table1_stored_values(table):
 
 
 def test_table1_metric_relations(table):
-    """The Table 1 metric is about phi/sqrt(2) of the true rotation angle phi (conventions.md)."""
+    """The Table 1 metric is about phi/sqrt(2) of the true rotation angle phi (conventions.md),
+    for both solvers."""
     np.testing.assert_allclose(table["delta_mrad"] * np.sqrt(2), table["phi_mrad"], rtol=1e-4)
+    np.testing.assert_allclose(table["norm_delta_mrad"] * np.sqrt(2), table["norm_phi_mrad"],
+                               rtol=1e-4)
+
+
+def test_relative_differences_by_hand():
+    """ours / paper - 1 for each column: 7.40 against 7.37 is +0.407 %, 6.77 against 6.77 is 0."""
+    rel = table1.relative_differences(pd.DataFrame({
+        "delta_mrad": [7.40], "paper_delta_mrad": [7.37], "norm_delta_mrad": [6.77],
+        "paper_norm_delta_mrad": [6.77]}))
+    assert list(rel.columns) == ["delta", "norm_delta"]
+    assert rel.delta.iloc[0] == pytest.approx(0.03 / 7.37, rel=1e-12)
+    assert rel.norm_delta.iloc[0] == 0.0
 
 
 def test_table1_trends_stated_in_the_paper(table):

@@ -27,6 +27,7 @@ from montecarlo.cli.common import (
     write_provenance,
     write_text,
 )
+from montecarlo.cli.stabilization import conventions_json, conventions_text
 from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
@@ -64,6 +65,11 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
 
     report = {**to_json(d, view, source), **(extra or {})}
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
+    if getattr(args, "identifiability", False):
+        from montecarlo.systems import identifiability
+
+        identifiability.annotate(report, d, view, args.pci_target, args.sets, args.seed,
+                                 args.n_jobs)
     if args.report:
         from montecarlo.output.diagnosis import (  # matplotlib: only for reports
             write_html_report,
@@ -84,6 +90,10 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
         steps.report(to_stderr=True)
         return 0
     print("\n".join([*preface, format_text(report)]))
+    if "identifiability" in report:
+        from montecarlo.systems.identifiability import format_table
+
+        print(format_table(report))
     if args.report:
         print(f"report written to {args.report}/ (report.md, report.html, diagnosis.json, "
               "residuals.png, gap.png)")
@@ -191,6 +201,9 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
                      str(args.data))
+    check = ste.convention_check(record, camera, args.image_noise_px, gyro_noise, args.mount,
+                                 args.gyro_sampling, d.before, args.alpha)
+    report["conventions"] = conventions_json(check)
     record_args = {"input": str(args.data), "alpha": args.alpha, "mount": args.mount,
                    "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
                    "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
@@ -198,6 +211,8 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         steps.report(to_stderr=True)
         return 0
     print(format_text(report))
+    for line in conventions_text(report["conventions"]):
+        print(line)
     steps.report(to_stderr=False)
     return 0
 
@@ -417,7 +432,14 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         p.add_argument("--trials", type=nonnegative_int, default=200,
                        help="Monte Carlo data sets per model in --report (default 200; 0: none)")
         p.add_argument("--seed", type=nonnegative_int, default=0,
-                       help="seed of the --report Monte Carlo (default 0)")
+                       help="seed of the --report and --identifiability Monte Carlo (default 0)")
+        p.add_argument("--identifiability", action="store_true",
+                       help="also the PCI and the MIB of each candidate, by Monte Carlo on "
+                       "the data's design (costly: about 10 x --sets diagnoses a candidate)")
+        p.add_argument("--pci-target", type=probability, default=0.8,
+                       help="PCI at which the MIB is stated (default 0.8)")
+        p.add_argument("--sets", type=positive_int, default=100,
+                       help="simulated data sets per size for --identifiability (default 100)")
         add_n_jobs_option(p)
 
     p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")

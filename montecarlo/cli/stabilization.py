@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 
 import numpy as np
 
@@ -20,6 +21,38 @@ from montecarlo.cli.common import (
     positive_int,
 )
 from montecarlo.units import ARCMIN, DEG_PER_HOUR, DEG_PER_ROOT_HOUR
+
+
+def conventions_json(check: dict) -> dict:
+    """The convention check of a stabilisation diagnosis with its angles in degrees."""
+    def degrees(angles: dict) -> dict:
+        return {k: math.degrees(v) for k, v in angles.items()}
+
+    return {"checked": check["checked"], "large_angles_deg": degrees(check["large_angles"]),
+            "named": check["named"],
+            "fits": {c: {"chi2_red": f["chi2_red"], "p_value": f["p_value"],
+                         "large_angles_deg": degrees(f["large_angles"])}
+                     for c, f in check["fits"].items()}}
+
+
+def conventions_text(conventions: dict) -> list[str]:
+    """The lines ``diagnose stabilization`` prints about the recording's conventions."""
+    from montecarlo.discrepancy.stabilization_effects import CONVENTIONS
+
+    lines = []
+    if conventions["large_angles_deg"]:
+        angles = ", ".join(f"{k} = {v:.1f} deg" for k, v in conventions["large_angles_deg"].items())
+        lines.append(f"installation angles not small ({angles}): the recording's frames or signs "
+                     "differ from the model's (docs/stabilization.md, 'Conventions of the "
+                     "recordings')")
+    for column in conventions["named"]:
+        lines.append(f"convention: the model fits with {column} negated: the recording has "
+                     f"{CONVENTIONS[column]}")
+    if conventions["checked"] and not conventions["named"]:
+        lines.append("convention: no single sign change of eta, eps or an image axis makes the "
+                     "model fit")
+    return lines
+
 
 forgetting = number(float, low=0.0, high=1.0, open_low=True)
 """An RLS forgetting factor, in (0, 1]."""

@@ -41,8 +41,10 @@ from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 from scipy.interpolate import CubicSpline
 
+from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.geometry.camera import Camera, pixels_from_direction
@@ -183,10 +185,13 @@ def whitened_innovations(residual: FloatArray, transition: FloatArray, gain: Flo
 
 def stabilization_problem(data: Record, camera: Camera, image_noise: float,
                           gyro_noise: float = 0.0, mount: str = "patent",
-                          gyro_sampling: str = "point") -> Problem:
-    """The DIA problem of one recording: the base model started at the estimator's result."""
-    est = se.estimate(data.t, data.gyro, data.eta, data.eps, data.los_px, camera, image_noise,
-                      gyro_noise, mount=mount, gyro_sampling=gyro_sampling)
+                          gyro_sampling: str = "point", est: se.Estimate | None = None
+                          ) -> Problem:
+    """The DIA problem of one recording: the base model started at the estimator's result
+    (``est``, computed here if None)."""
+    if est is None:
+        est = se.estimate(data.t, data.gyro, data.eta, data.eps, data.los_px, camera,
+                          image_noise, gyro_noise, mount=mount, gyro_sampling=gyro_sampling)
     base = base_effect(mount)
     start = dict(zip(base.parameters, [*est.values.tolist(), *est.aim_px.tolist()],
                      strict=True))
@@ -225,3 +230,97 @@ def report_view(data: Record, camera: Camera, mount: str, gyro_sampling: str) ->
     return SystemView("stabilization", display_unit, "px", 1.0, ("x", "z"),
                       lambda params: raw_residuals(data, camera, params, mount, gyro_sampling),
                       [("time [s]", data.t, None)], "stabilization", study_params)
+
+
+# --------------------------------------------------------------------------------------------
+# Conventions of the recording
+# --------------------------------------------------------------------------------------------
+
+CONVENTIONS = {
+    "eta_rad": "eta counted the other way (the model's eta > 0 turns the LOS left, "
+               "counter-clockwise seen from above)",
+    "eps_rad": "eps counted the other way (the model's eps > 0 turns the LOS up)",
+    "los_x_px": "image x pointing the other way (the model's x is to the right)",
+    "los_z_px": "image z pointing the other way (the model's z is up)",
+}
+"""Columns whose sign another author may define the other way -> what the model assumes."""
+
+SMALL_ANGLE = np.radians(30.0)
+"""Installation angles beyond this (after wrapping into (-180°, 180°]) are not installation
+errors: a frame or sign convention differs (an eta counted clockwise fits exactly with half
+turns about x in delta_px and delta_gx) [rad]."""
+
+ANGLES = ("delta_px", "delta_gx", "delta_gy", "delta_z", "delta_py", "delta_gz")
+
+
+def large_angles(params: Mapping[str, float]) -> dict[str, float]:
+    """The installation angles of a fit beyond :data:`SMALL_ANGLE`, wrapped into (-pi, pi]
+    [rad]."""
+    out = {}
+    for name in ANGLES:
+        if name in params:
+            wrapped = float(np.angle(np.exp(1j * float(params[name]))))
+            if abs(wrapped) > SMALL_ANGLE:
+                out[name] = wrapped
+    return out
+
+
+def flipped(data: Record, column: str) -> Record:
+    """The recording with the sign of one column of :data:`CONVENTIONS` changed."""
+    if column == "eta_rad":
+        return Record(data.t, data.gyro, -data.eta, data.eps, data.los_px)
+    if column == "eps_rad":
+        return Record(data.t, data.gyro, data.eta, -data.eps, data.los_px)
+    sign = np.array([-1.0, 1.0]) if column == "los_x_px" else np.array([1.0, -1.0])
+    return Record(data.t, data.gyro, data.eta, data.eps, data.los_px * sign)
+
+
+def convention_check(data: Record, camera: Camera, image_noise: float, gyro_noise: float,
+                     mount: str, gyro_sampling: str, base: LeastSquaresFit, alpha: float
+                     ) -> dict[str, object]:
+    """Whether the recording's conventions differ from the model's, and which.
+
+    Run when the base model fails the global test at ``alpha`` or fits only with installation
+    angles that are not small (:func:`large_angles`): the base model is fitted again to the
+    recording with each column of :data:`CONVENTIONS` negated in turn (when the estimator
+    converges on it), and a column is named when that fit passes the global test with small
+    angles. A recording the model fits with small angles is not checked (``checked`` false).
+
+    Both image axes may be named: negating both turns the image by a half turn about its
+    centre, which (for a target near the centre) the model explains by negating the four
+    combinations, so a recording with one image axis the other way fits with either negated.
+
+    Returns
+    -------
+    dict
+        ``checked`` (bool), ``large_angles`` ({name: angle [rad]} of the base fit), ``named``
+        (columns whose negation makes the model fit), ``fits`` ({column: {"chi2_red",
+        "p_value", "large_angles"}} of each refit).
+    """
+    large = large_angles(base.params)
+    p_base = float(stats.chi2.sf(base.chi2, base.dof))
+    out: dict[str, object] = {"checked": False, "large_angles": large, "named": [], "fits": {}}
+    if p_base >= alpha and not large:
+        return out
+    out["checked"] = True
+    fits: dict[str, dict[str, object]] = {}
+    for column in CONVENTIONS:
+        other = flipped(data, column)
+        try:  # the estimator may break down on data the model cannot explain
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                est = se.estimate(other.t, other.gyro, other.eta, other.eps, other.los_px,
+                                  camera, image_noise, gyro_noise, mount=mount,
+                                  gyro_sampling=gyro_sampling)
+                if not est.converged:
+                    continue
+                fit = fit_model(stabilization_problem(other, camera, image_noise, gyro_noise,
+                                                      mount, gyro_sampling, est), ())
+        except (FitError, np.linalg.LinAlgError, ValueError):
+            continue
+        fits[column] = {"chi2_red": fit.chi2_red,
+                        "p_value": float(stats.chi2.sf(fit.chi2, fit.dof)),
+                        "large_angles": large_angles(fit.params)}
+    out["fits"] = fits
+    out["named"] = [c for c, f in fits.items()
+                    if f["p_value"] >= alpha and not f["large_angles"]]
+    return out

@@ -21,13 +21,16 @@ _INT_MIN = np.iinfo(np.int64).min
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def accumulate(values, rows, hist, stats, bins):  # pragma: no cover - compiled
+def accumulate(values, rows, hist, stats, bins, piece):  # pragma: no cover - compiled
     """Add per-trial metric values to streaming statistics (NaN = invalid, skipped).
 
     values : (k, n) float64, of which ``rows`` (m,) are the metrics, in this order;
     hist : (m, N_BINS) int64, in place; stats : (m, 5) float64 in
-    place: count, mean, m2, min, max (sub-chunks merged by Chan's formula in a fixed order);
-    bins : (n,) int32 scratch for the bin indices (as :func:`.aggregate.bin_index`).
+    place: count, mean, m2, min, max; piece : int, the values are reduced ``piece`` columns
+    at a time, each piece's moments merged into ``stats`` by Chan's formula, piece after piece
+    and row after row (so the result depends on ``piece``, never on how many columns one call
+    is given); bins : (piece,) int32 scratch for the bin indices (as
+    :func:`.aggregate.bin_index`).
 
     Written for the loop vectoriser: validity is tested on the exponent bits and min/max are
     taken on order-preserving integer keys of the bits with integer min/max (a float min/max
@@ -35,14 +38,22 @@ def accumulate(values, rows, hist, stats, bins):  # pragma: no cover - compiled
     (vectorised): deterministic on one CPU type, and may differ in the last bits between CPU
     types, as numpy's own SIMD dispatch does.
     """
-    m = rows.shape[0]
     n = values.shape[1]
     bits = values.view(np.int64)
+    for start in range(0, n, piece):
+        _accumulate_piece(values, bits, rows, hist, stats, bins, start, min(start + piece, n))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _accumulate_piece(values, bits, rows, hist, stats, bins, start, stop
+                      ):  # pragma: no cover - compiled
+    """:func:`accumulate` of the columns ``start:stop``."""
+    m = rows.shape[0]
     for r in range(m):
-        row = values[rows[r]]
-        brow = bits[rows[r]]
+        row = values[rows[r], start:stop]
+        brow = bits[rows[r], start:stop]
         shift = 0.0  # a value near the data, for a one-pass sum of squared deviations
-        for i in range(n):
+        for i in range(stop - start):
             if row[i] == row[i]:
                 shift = row[i]
                 break
@@ -51,7 +62,7 @@ def accumulate(values, rows, hist, stats, bins):  # pragma: no cover - compiled
         s2 = 0.0
         kmin = _INT_MAX
         kmax = _INT_MIN
-        for i in range(n):
+        for i in range(stop - start):
             b = brow[i]
             valid = (b & _EXPONENT) != _EXPONENT  # finite
             d = row[i] - shift if valid else 0.0
@@ -66,7 +77,7 @@ def accumulate(values, rows, hist, stats, bins):  # pragma: no cover - compiled
             idx = ZERO_BIN if k < 0 else (ZERO_BIN - 1 - kk if b < 0 else ZERO_BIN + 1 + kk)
             bins[i] = idx if valid else -1
         hrow = hist[r]
-        for i in range(n):
+        for i in range(stop - start):
             if bins[i] >= 0:
                 hrow[bins[i]] += 1
         if cnt == 0:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from montecarlo.io.files import PROVENANCE, atomic_write_bytes
+from montecarlo.io.files import FILES_KEY, PROVENANCE, atomic_write_bytes
 
 HTML_NAME = "report.html"
 SVG_RC = {"svg.hashsalt": "montecarlo-report", "svg.fonttype": "none"}
@@ -225,9 +225,11 @@ def verdict_first(md: str, headings: Sequence[str] = ("Spec", "Verdict", "Answer
 
 
 def provenance_table(prov: Mapping[str, Any]) -> str:
-    """The provenance as an HTML table: the main entries, then the rest (JSON for nested)."""
+    """The provenance as an HTML table: the main entries, then the rest (JSON for nested).
+    The directory's list of written files is left out: it is written after the report and
+    changes with it, so the same results would not give the same bytes."""
     keys = [k for k in PROVENANCE_FIELDS if k in prov]
-    skip = {"resolved_study", "study_source", "libraries"}
+    skip = {"resolved_study", "study_source", "libraries", FILES_KEY}
     keys += sorted(k for k in prov if k not in keys and k not in skip)
     rows = []
     for k in keys:

@@ -176,7 +176,8 @@ def _scratch(m: int) -> tuple[np.ndarray, ...]:
     from montecarlo.seed000 import ground_kernel as gk
 
     fields = np.empty((2 * gk.N_FIELDS, m))
-    return np.empty((2, m), np.uint16), fields, np.empty(m, np.int32), gk.output_rows(fields)
+    bins = np.empty(min(m, gk.SUB_CHUNK), np.int32)
+    return np.empty((2, m), np.uint16), fields, bins, gk.output_rows(fields)
 
 
 class GroundSystem:
@@ -333,9 +334,12 @@ class GroundSystem:
         acc = accumulate.new_stats(len(keys))
         flag_counts = np.zeros((2, 256), np.int64)
         tick = time.thread_time if clock is not None else None
-        for s in range(0, n, gk.SUB_CHUNK):  # drawn piece by piece, to stay in cache
+        # Drawn, solved and reduced to metrics SOLVE_CHUNK trials at a time (a source's
+        # generator gives the same numbers in one call as in several); the statistics are
+        # merged every SUB_CHUNK trials whatever SOLVE_CHUNK is, so they do not depend on it.
+        for s in range(0, n, gk.SOLVE_CHUNK):
             t0 = tick() if tick else 0.0
-            m = min(gk.SUB_CHUNK, n - s)
+            m = min(gk.SOLVE_CHUNK, n - s)
             flags, fields, bins, out_rows = _scratch(m)
             true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
                                                  _draw_buffers(m))
@@ -351,7 +355,7 @@ class GroundSystem:
             for i in range(2):
                 if flags[i].any():
                     flag_counts[i] += np.bincount(flags[i], minlength=256)
-            accumulate.accumulate(fields, gk.METRIC_ROWS, hist, acc, bins)
+            accumulate.accumulate(fields, gk.METRIC_ROWS, hist, acc, bins, gk.SUB_CHUNK)
             if tick and clock is not None:
                 t4 = tick()
                 for stage, spent in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3),

@@ -111,7 +111,7 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
 
     The stages of ``GroundSystem.accumulate_block`` (draws, solve, metrics, accumulation) are
     timed over ``n`` trials of the workload; each against its own ceiling, measured in the
-    same run on the same sub-chunks (``ground_kernel.SUB_CHUNK`` trials): the draws against
+    same run on the same chunks (``ground_kernel.SOLVE_CHUNK`` trials): the draws against
     the generator alone filling as many U[0, 1) numbers into a reused buffer, the metrics
     against the same ufuncs alone on contiguous copies of the same arguments, the solve and
     the accumulation against a memory copy of as many bytes as they read and write. Times
@@ -125,7 +125,7 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
     study = _study(n)
     system, p = study.system, study.points[0].prepared
     bs = study.block_size
-    m = min(gk.SUB_CHUNK, n)
+    m = min(gk.SOLVE_CHUNK, n)
     chunks = -(-n // m)
 
     def stages() -> dict[str, float]:
@@ -212,7 +212,8 @@ def format_roofline(r: dict[str, Any]) -> list[str]:
     """The roofline table of :func:`ground_roofline`."""
     total = r["total_ns_per_trial"]
     lines = [f"roofline of the fused ground path, one core, CPU time ({r['trials']:,} trials "
-             f"in sub-chunks of {r['sub_chunk']:,}); fraction = ceiling / stage:",
+             f"in chunks of {r['sub_chunk']:,}); "
+             "fraction = ceiling / stage:",
              f"  {'stage':<13}{'ns/trial':>9}{'share':>7}  {'ceiling ns/trial':>16}"
              f"{'fraction':>9}  ceiling"]
     for s in r["stages"]:
