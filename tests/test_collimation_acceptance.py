@@ -1,6 +1,9 @@
 """Acceptance of the seed 003 fit, measured by Monte Carlo (slow: about 20 s).
 
 Paper-like layout (:func:`paper_layout`, 5 + 5 mirrors), theodolite 2″, INS 2″, offsets 0.05°.
+The absolute-reading model is not the paper's procedure (the real table rejects it), so the
+paper's 15″ claim is not judged here; it is judged on the procedure's readings, out of sample
+(``collimation verify``, ``collimation fit --verify leave-one-out``).
 """
 
 import math
@@ -29,11 +32,3 @@ def test_offsets_within_2_sigma_and_residuals_match_noise():
           f"{math.sqrt(17 / 20):.3f} (3 of 20 degrees of freedom fitted)")
     assert abs(ratio - 1) <= 0.2  # acceptance
     assert abs(math.sqrt(np.mean(out["chi2_red"])) - 1) <= 3 * math.sqrt(1 / (2 * 17 * n))
-
-
-def test_paper_15_arcsec_claim_under_2_arcsec_theodolite():
-    """Seed 003: consistency of INS axis and optical axis within 15″ after calibration."""
-    out = sc.run_trials({}, np.random.default_rng(2025), 500)
-    p95 = np.percentile(out["axis_error_angle"], 95) / ARCSEC
-    print(f"true axis error: 95th percentile {p95:.2f}″")
-    assert p95 < 15.0

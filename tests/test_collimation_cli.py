@@ -1,6 +1,7 @@
 """``montecarlo collimation ...`` run as a subprocess, as users run it."""
 
 import json
+import math
 import subprocess
 import sys
 
@@ -182,3 +183,93 @@ def test_absolute_data_read_as_reference_readings_is_flagged(tmp_path, capsys):
     assert main(["collimation", "fit", str(data), "--angle-sigma-arcsec", "2.83",
                  "--readings", "absolute"]) == 0
     assert "MISFIT" not in capsys.readouterr().out
+
+
+def _relative_file(tmp_path, name, seed, side="left", mount="1"):
+    path = tmp_path / name
+    assert main(["collimation", "simulate", str(path), "--seed", str(seed), "--roll-mirror",
+                 side, "--no-reference-rows", "--axis-az-arcsec", "-36", "--axis-el-arcsec",
+                 "-2520", "--mount-roll-sigma-deg", mount]) == 0
+    return path
+
+
+def test_auto_takes_the_side_the_data_support_and_warns_once(tmp_path, capsys):
+    """Relative readings made with the roll mirror on the left: the default (auto) fits both
+    sides, keeps left, reports both chi-squares and warns in one line on standard error that
+    the stated (the text's) right is rejected. Stating right keeps right, with the warning."""
+    data, out = _relative_file(tmp_path, "a.csv", 5), tmp_path / "fit.json"
+    capsys.readouterr()
+    assert main(["collimation", "fit", str(data), "--json", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    r = json.loads(out.read_text())
+    side = r["roll_mirror"]
+    assert side["chosen"] == "left" and side["stated"] == "right" and side["decided"]
+    assert side["chi2_right"] > 10 * side["chi2_left"]
+    assert r["azimuth_sense"]["chosen"] == "same"
+    assert r["claim_15_arcsec"]["in_sample"] is True
+    assert len(err) == 1 and err[0].startswith("warning: the data reject the roll mirror on "
+                                               "the right")
+    assert abs(r["parameters"]["axis_el"] + 2520.0) < 4 * r["stderr"]["axis_el"] + 72.0
+    assert main(["collimation", "fit", str(data), "--roll-mirror", "right", "--json",
+                 str(tmp_path / "right.json")]) == 0
+    assert json.loads((tmp_path / "right.json").read_text())["roll_mirror"]["chosen"] == "right"
+    assert "kept as asked" in capsys.readouterr().err
+
+
+def test_corrected_values_are_in_the_file_theodolite_frame(tmp_path):
+    """Noise-free data whose theodolite azimuth zero is 5° off the central mirror, free rolls:
+    the corrected reading of each mirror points along its normal, so its heading equals the
+    file's theodolite azimuth (hand: the simulator wrote the true normal there), not the
+    azimuth relative to the fitted central mirror."""
+    from montecarlo.io.collimation_csv import MirrorData, write_mirror_csv
+    from montecarlo.seed003 import procedure as pr
+    from montecarlo.seed003.model import Noise
+
+    az, el, sets = pr.procedure_layout()
+    d = pr.simulate_procedure(math.radians(-0.01), math.radians(-0.7), az + math.radians(5),
+                              el, Noise(0, 0, 0, 0, 0), 0, side=-1.0,
+                              az_center=math.radians(5.0), reference_rows=False,
+                              with_roll=False)
+    names = tuple(f"M{i}" for i in range(az.size))
+    path = tmp_path / "c.csv"
+    write_mirror_csv(path, MirrorData(names, tuple(sets), d.theodolite_az, d.theodolite_el,
+                                      d.ins_az, d.ins_el))
+    out = tmp_path / "c.json"
+    assert main(["collimation", "fit", str(path), "--free-roll", "--angle-sigma-arcsec", "2",
+                 "--json", str(out)]) == 0
+    r = json.loads(out.read_text())
+    for m, a, e in zip(r["mirrors"], np.degrees(az) + 5.0, np.degrees(el), strict=True):
+        assert (m["corrected_ins_az_deg"] - a) * 3600 == pytest.approx(0.0, abs=0.1)
+        assert (m["theodolite_az_deg"] - a) * 3600 == pytest.approx(0.0, abs=1e-6)
+        assert (m["corrected_ins_el_deg"] - e) * 3600 == pytest.approx(0.0, abs=0.1)
+
+
+def test_verify_applies_a_saved_fit_out_of_sample(tmp_path, capsys):
+    """The fit's offsets applied to its own data reproduce its deviations (level mount: only the
+    reference azimuth is refitted, to the same value); applied to a second set of the same
+    device they give out-of-sample deviations; leave-one-out adds them to the fit's JSON."""
+    a = _relative_file(tmp_path, "a.csv", 7, mount="0")
+    b = _relative_file(tmp_path, "b.csv", 8, mount="0")
+    fit, same, other = tmp_path / "fit.json", tmp_path / "same.json", tmp_path / "other.json"
+    assert main(["collimation", "fit", str(a), "--angle-sigma-arcsec", "2.83", "--verify",
+                 "leave-one-out", "--json", str(fit)]) == 0
+    r = json.loads(fit.read_text())
+    assert r["verification"]["in_sample"] is False
+    assert len(r["verification"]["mirrors"]) == 10
+    assert main(["collimation", "verify", str(fit), str(a), "--json", str(same)]) == 0
+    s = json.loads(same.read_text())
+    for m, n in zip(r["mirrors"], s["mirrors"], strict=True):
+        assert n["deviation_az_arcsec"] == pytest.approx(m["deviation_az_arcsec"], abs=1e-3)
+        assert n["deviation_el_arcsec"] == pytest.approx(m["deviation_el_arcsec"], abs=1e-3)
+    assert main(["collimation", "verify", str(fit), str(b), "--json", str(other)]) == 0
+    o = json.loads(other.read_text())
+    worst = max(max(abs(m["deviation_az_arcsec"]), abs(m["deviation_el_arcsec"]))
+                for m in o["mirrors"])
+    assert o["claim_15_arcsec"]["max_deviation_arcsec"] == pytest.approx(worst)
+    assert o["in_sample"] is False and o["claim_15_arcsec"]["holds"] == (worst <= 15.0)
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"readings": "reference"}')
+    capsys.readouterr()
+    assert main(["collimation", "verify", str(bad), str(b)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.json" in err[0]

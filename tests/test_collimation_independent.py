@@ -1,9 +1,11 @@
-"""The seed 003 procedure fit on data of a simulator written independently of it.
+"""The seed 003 procedure fit on data of a simulator written blind to it.
 
-``tests/independent/collimation_procedure.py`` was written from the specification of the
-procedure (docs/collimation.md, "Seed 003's measuring procedure") without reading the
-project's model; it writes the calibration CSV, which is read here exactly as the command line
-reads it. Agreement therefore checks the reading model itself, not only the fit.
+``tests/independent/collimation_blind.py`` was written by another author from the seed text and
+the CSV format only, never this package's modules, docs or tests; it writes the calibration CSV,
+which is read here exactly as the command line reads it. Agreement therefore checks the reading
+model itself, not only the fit. Its conventions are its own (NED frame, Z-Y-X attitude, the
+roll mirror's side and the azimuth sense as options); the fit runs with the side and sense the
+data support (:func:`montecarlo.seed003.conventions.fit_with_conventions`).
 """
 
 from __future__ import annotations
@@ -12,15 +14,12 @@ import numpy as np
 import pytest
 
 from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, procedure_data, read_mirror_csv
-from montecarlo.seed003.procedure import fit_procedure
+from montecarlo.seed003.conventions import fit_with_conventions
 from montecarlo.units import ARCSEC
-from tests.independent.collimation_procedure import (
-    paper_like_layout,
-    pitch_to_60_layout,
-    simulate_procedure,
-)
+from tests.independent import collimation_blind as cb
 
-LAYOUTS = {"paper-like": paper_like_layout, "pitch to 60": pitch_to_60_layout}
+LAYOUTS = {"paper-like": (4.0, 7.5, 11.0, 14.5, 18.0),
+           "pitch to 60": (12.0, 24.0, 36.0, 48.0, 60.0)}
 
 CASES = [  # layout, reference rows, roll ("recorded", "level", "free"), roll mirror side
     ("paper-like", True, "recorded", "right"),
@@ -35,19 +34,22 @@ CASES = [  # layout, reference rows, roll ("recorded", "level", "free"), roll mi
 
 
 def _fit(tmp_path, case, gamma, lam, rng, noise=2.0, mount_roll=1.0):
-    """Simulate one calibration independently, read its CSV and fit it [arcsec in, rad out]."""
+    """Simulate one calibration blind, read its CSV and fit it [arcsec in, rad out]."""
     layout, rows, roll, side = case
-    text = simulate_procedure(
-        LAYOUTS[layout](side), gamma, lam, rng=rng, sigma_theodolite_arcsec=noise,
-        sigma_ins_arcsec=noise, roll_sigma_deg=0.0 if roll == "level" else mount_roll,
-        record_roll=roll == "recorded", roll_mirror=side, reference_rows=rows,
-        heading_of_theodolite_zero_deg=float(rng.uniform(-180.0, 180.0)))
+    out, _ = cb.simulate(gamma, lam, roll_mirror_side=side, azimuth_sense="cw",
+                         mount_roll_sigma_deg=0.0 if roll == "level" else mount_roll,
+                         write_roll=roll == "recorded", reference_rows=rows,
+                         theodolite_sigma_arcsec=noise, ins_sigma_arcsec=noise,
+                         pitch_elevations_deg=LAYOUTS[layout], rng=rng)
     path = tmp_path / "cal.csv"
-    path.write_text(text)
+    cb.write_csv(path, out)
     data = procedure_data(read_mirror_csv(path, sets=SETS + REFERENCE_SETS))
     sigma = 2.0 * ARCSEC  # the weights; a posteriori sigmas of noise-free data would be zero
-    return fit_procedure(data, side=1.0 if side == "right" else -1.0, free_roll=roll == "free",
-                         sigma_ins=sigma, sigma_theodolite=sigma, before=False)
+    fit, _, choice = fit_with_conventions(data, sense="same", free_roll=roll == "free",
+                                          sigma_ins=sigma, sigma_theodolite=sigma, before=False)
+    if not rows and noise == 0.0:  # noise-free: the side is decided
+        assert choice["roll_mirror"].chosen == side
+    return fit
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c[0]}-{c[1]}-{c[2]}-{c[3]}")

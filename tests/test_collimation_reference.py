@@ -258,3 +258,47 @@ def test_absolute_readings_give_the_previous_results(tmp_path):
     assert r["rms_arcsec"]["after"]["all"] == pytest.approx(2.4222814748130665, rel=1e-9)
     assert r["rms_arcsec"]["before"]["all"] == pytest.approx(107.65476732647608, rel=1e-9)
     assert r["chi2"] == pytest.approx(17.00241376880737, rel=1e-9)
+
+
+@pytest.mark.parametrize(("rows", "expected_dof"), [(True, 2), (False, 1)])
+def test_free_roll_dof_counts_the_roll_prior(rows, expected_dof):
+    """Hand count, 2 measured mirrors (one azimuth, one pitch), free rolls at all 4 pointings:
+    4 readings + 4 prior pseudo-observations - (gamma, lambda [, reference_az] + 4 rolls) =
+    2 with reference rows, 1 without. The layout is solvable and must not be refused."""
+    az, el, _ = pr.procedure_layout([math.radians(30.0)], [math.radians(20.0)])
+    d = pr.simulate_procedure(300 * A, -900 * A, az, el, Noise(A, A, A, A, math.radians(0.5)),
+                              4, reference_rows=rows, with_roll=False)
+    f = pr.fit_procedure(d, free_roll=True, sigma_ins=A, sigma_theodolite=A, before=False)
+    assert f.dof == expected_dof
+    assert len(f.names) == (2 if rows else 3) + 4
+    assert np.isfinite(f.chi2) and all(np.isfinite(list(f.stderr.values())))
+
+
+def test_study_hands_the_fit_the_per_reading_ins_sigma(monkeypatch):
+    """docs/collimation.md: the procedure's fit takes sigma_INS per heading, pitch and roll
+    read, not the root-sum-square of heading and pitch (a residual's). With INS heading and
+    pitch errors of 3″ each and the theodolite's 2″, the fit must be handed 3″ and 2″, on the
+    literal path (trial by trial) and on the block path."""
+    from montecarlo.seed003 import batch_fit as bf
+    from montecarlo.systems import collimation as sc
+
+    seen = []
+    real, real_block = pr.fit_procedure, bf.fit_block
+
+    def spy(data, **kw):
+        seen.append((kw["sigma_ins"], kw["sigma_theodolite"]))
+        return real(data, **kw)
+
+    def spy_block(data, **kw):
+        seen.append((kw["sigma_ins"], kw["sigma_theodolite"]))
+        return real_block(data, **kw)
+
+    monkeypatch.setattr(pr, "fit_procedure", spy)
+    monkeypatch.setattr(bf, "fit_block", spy_block)
+    params = {"procedure": 1, "ins_heading_sigma": 3 * A, "ins_pitch_sigma": 3 * A,
+              "ins_roll_sigma": 3 * A, "theodolite_sigma": 2 * A}
+    for reference in (True, False):
+        seen.clear()
+        sc.run_trials(params, np.random.default_rng(0), 1, reference=reference)
+        assert seen and seen[0][0] / A == pytest.approx(3.0, rel=1e-12)
+        assert seen[0][1] / A == pytest.approx(2.0, rel=1e-12)

@@ -297,3 +297,29 @@ def test_absolute_readings_analysed_as_the_procedure_name_the_reading_model():
                        lambda d: pe.procedure_problem(d, SIGMA), lambda d, f: 0.0, truth, (),
                        True, "reading_model", 0.01, np.random.default_rng(23), 60)
     assert out["named_expected"].mean() >= 0.95
+
+
+def test_theodolite_collimation_shifts_only_the_theodolite_by_c_over_cos_el():
+    """A theodolite with collimation c reads azimuth ``az + c / cos(el)`` (read in one face);
+    the INS autocollimates on the true normal. Hand-derived for c = 20″, zero offsets, level
+    mount, reference rows: the pitch mirror at el = 18° is read at
+    20″ / cos 18° = 21.0292″, the central mirror (el = 0) at 20″, and the INS's heading at both
+    is the same (both normals at azimuth 0). The model with the same c leaves no residual."""
+    c = 20.0 * AS
+    layout = pe.paper_layout(True)
+    truth = {"axis_az": 0.0, "axis_el": 0.0, "theodolite_c": c}
+    data = pe.simulate(layout, truth, EXACT, 0)
+    i = layout.mirror.index("P5")
+    assert layout.theodolite_el[i] == pytest.approx(math.radians(18.0))
+    assert data.theodolite_az[i] / AS == pytest.approx(21.0292, abs=5e-4)
+    assert data.theodolite_az[0] / AS == pytest.approx(20.0, abs=1e-9)
+    assert (data.ins_az[i] - data.ins_az[0]) / AS == pytest.approx(0.0, abs=1e-9)
+    assert np.max(np.abs(pe.raw_residuals(data, truth))) / AS < 1e-8
+    # the model's relative heading at that mirror changes by -c (1/cos el - 1) = -1.0292″
+    # when c is assumed in the theodolite's readings that are in fact error-free
+    plain = pe.simulate(layout, {"axis_az": 0.0, "axis_el": 0.0}, EXACT, 0)
+    h0, _ = pe.predict_relative({}, plain)
+    h1, _ = pe.predict_relative({"theodolite_c": c}, plain)
+    j = list(procedure_data(plain).measured).index(i)
+    assert (h1 - h0)[j] / AS == pytest.approx(-20.0 * (1 / math.cos(math.radians(18)) - 1),
+                                              abs=1e-6)

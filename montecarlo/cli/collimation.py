@@ -4,9 +4,16 @@ from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from pathlib import Path
 
+from montecarlo.cli.collimation_report import (
+    fit_report,
+    format_reference_report,
+    format_report,
+    format_verification,
+    reference_report,
+    verification_report,
+)
 from montecarlo.cli.common import (
     Parser,
     add_json_option,
@@ -22,10 +29,15 @@ from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
 
-if TYPE_CHECKING:
-    from montecarlo.io.collimation_csv import MirrorData
-    from montecarlo.seed003.fit import Fit
-    from montecarlo.seed003.procedure import ProcedureData, ProcedureFit
+__all__ = [
+    "add_commands",
+    "fit_report",
+    "format_reference_report",
+    "format_report",
+    "format_verification",
+    "reference_report",
+    "verification_report",
+]
 
 
 def _cmd_collimation_fit(args: argparse.Namespace) -> int:
@@ -37,6 +49,7 @@ def _cmd_collimation_fit(args: argparse.Namespace) -> int:
     if args.readings == "reference":
         return _fit_reference(args)
     for flag, used in (("--free-roll", args.free_roll), ("--roll-mirror", args.roll_mirror),
+                       ("--azimuth-sense", args.azimuth_sense), ("--verify", args.verify),
                        ("--roll-sigma-deg", args.roll_sigma_deg),
                        ("--ins-sigma-arcsec", args.ins_sigma_arcsec),
                        ("--theodolite-sigma-arcsec", args.theodolite_sigma_arcsec)):
@@ -66,9 +79,11 @@ def _cmd_collimation_fit(args: argparse.Namespace) -> int:
 
 def _fit_reference(args: argparse.Namespace) -> int:
     """``collimation fit --readings reference``: seed 003's procedure (section 3.2)."""
+    import sys
+
     from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, procedure_data, read_mirror_csv
-    from montecarlo.seed003.procedure import NotDetermined, fit_procedure
-    from montecarlo.seed003.reference import SIDES
+    from montecarlo.seed003.conventions import fit_with_conventions
+    from montecarlo.seed003.procedure import NotDetermined
 
     if args.fit_frame_tilt:
         raise InputError("--fit-frame-tilt: only with --readings absolute (under the procedure "
@@ -76,27 +91,103 @@ def _fit_reference(args: argparse.Namespace) -> int:
     readings = read_mirror_csv(args.data, 2, "gamma and lambda", sets=SETS + REFERENCE_SETS)
     data = procedure_data(readings)
     sigmas = _reference_sigmas(args)
-    side = SIDES[args.roll_mirror or "right"]
     roll_sigma = math.radians(2.0 if args.roll_sigma_deg is None else args.roll_sigma_deg)
     try:
-        result = fit_procedure(data, side=side, free_roll=args.free_roll, roll_sigma=roll_sigma,
-                               sigma_ins=sigmas[0], sigma_theodolite=sigmas[1])
+        result, used, choices = fit_with_conventions(
+            data, side=args.roll_mirror or "auto", sense=args.azimuth_sense or "auto",
+            free_roll=args.free_roll, roll_sigma=roll_sigma, sigma_ins=sigmas[0],
+            sigma_theodolite=sigmas[1])
     except NotDetermined as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    report = reference_report(readings, data, result, str(args.data), args.free_roll,
-                              roll_sigma)
+    report = reference_report(readings, used, result, str(args.data), args.free_roll,
+                              roll_sigma, choices)
+    if args.verify == "leave-one-out":
+        from montecarlo.seed003.verification import leave_one_out
+
+        try:
+            check = leave_one_out(used, side=result.side, free_roll=args.free_roll,
+                                  roll_sigma=roll_sigma, sigma_ins=result.sigma_ins,
+                                  sigma_theodolite=result.sigma_theodolite)
+        except NotDetermined as exc:
+            raise InputError(f"{args.data}: --verify leave-one-out: {exc}") from None
+        report["verification"] = verification_report(
+            check, [m["mirror"] for m in report["mirrors"]], "leave-one-out")
+    for choice in choices.values():
+        line = choice.warning()
+        if line:
+            print(line, file=sys.stderr)
     if args.json is not None:
         from montecarlo.output.provenance import provenance
 
         record = provenance("collimation fit", input=str(args.data), readings="reference",
-                            free_roll=args.free_roll, roll_mirror=args.roll_mirror or "right",
+                            free_roll=args.free_roll, roll_mirror=args.roll_mirror or "auto",
+                            azimuth_sense=args.azimuth_sense or "auto",
                             roll_sigma_deg=math.degrees(roll_sigma),
                             angle_sigma_arcsec=args.angle_sigma_arcsec,
                             ins_sigma_arcsec=args.ins_sigma_arcsec,
-                            theodolite_sigma_arcsec=args.theodolite_sigma_arcsec)
+                            theodolite_sigma_arcsec=args.theodolite_sigma_arcsec,
+                            verify=args.verify)
         if emit_json(args, {**report, "provenance": record}):
             return 0
     print(format_reference_report(report))
+    return 0
+
+
+def _cmd_collimation_verify(args: argparse.Namespace) -> int:
+    """``collimation verify FIT.json NEW.csv``: a saved fit applied to another data set."""
+    import json
+
+    import numpy as np
+
+    from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, procedure_data, read_mirror_csv
+    from montecarlo.seed003.conventions import SENSES, with_sense
+    from montecarlo.seed003.procedure import NotDetermined
+    from montecarlo.seed003.reference import SIDES
+    from montecarlo.seed003.verification import verify
+
+    check_json_option(args)
+    try:
+        saved = json.loads(Path(args.fit).read_text())
+    except OSError as exc:
+        raise InputError(f"{args.fit}: cannot read ({exc.strerror})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{args.fit}: not JSON ({exc.msg}, line {exc.lineno})") from None
+    try:
+        if saved.get("readings") != "reference":
+            raise KeyError("readings")
+        gamma = float(saved["parameters"]["axis_az"]) * ARCSEC
+        lam = float(saved["parameters"]["axis_el"]) * ARCSEC
+        side = SIDES[saved["roll_mirror"]["chosen"]]
+        sense = saved["azimuth_sense"]["chosen"]
+        SENSES[sense]
+        settings = saved["settings"]
+        free_roll = bool(settings["free_roll"])
+        roll_sigma = math.radians(float(settings["roll_sigma_deg"]))
+        s_ins = float(saved["sigma_arcsec"]["ins"]) * ARCSEC
+        s_theo = float(saved["sigma_arcsec"]["theodolite"]) * ARCSEC
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"{args.fit}: not a fit saved by 'collimation fit --json' under "
+                         f"--readings reference (field {exc})") from None
+    readings = read_mirror_csv(args.data, 1, "one mirror", sets=SETS + REFERENCE_SETS)
+    data = with_sense(procedure_data(readings), sense)
+    if not data.measured.size:
+        raise InputError(f"{args.data}: no measured (azimuth/pitch) mirror")
+    try:
+        check = verify(data, gamma, lam, side=side, free_roll=free_roll, roll_sigma=roll_sigma,
+                       sigma_ins=s_ins, sigma_theodolite=s_theo)
+    except (NotDetermined, np.linalg.LinAlgError) as exc:
+        raise InputError(f"{args.data}: the saved offsets cannot be applied ({exc})") from None
+    names = [readings.mirror[i] for i in data.measured]
+    report = {"system": "collimation", "fit": str(args.fit), "file": str(args.data),
+              "axis_az_arcsec": gamma / ARCSEC, "axis_el_arcsec": lam / ARCSEC,
+              **verification_report(check, names, "new data set")}
+    if args.json is not None:
+        from montecarlo.output.provenance import provenance
+
+        record = provenance("collimation verify", fit=str(args.fit), input=str(args.data))
+        if emit_json(args, {**report, "provenance": record}):
+            return 0
+    print(format_verification(report))
     return 0
 
 
@@ -240,8 +331,16 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    "absolute heading and pitch, theodolite frame linked by a heading only")
     p.add_argument("--free-roll", action="store_true",
                    help="fit one INS roll per pointing (prior N(0, --roll-sigma-deg))")
-    p.add_argument("--roll-mirror", choices=("right", "left"), default=None,
-                   help="side of the roll reference mirror (default right, as in the paper)")
+    p.add_argument("--roll-mirror", choices=("auto", "right", "left"), default=None,
+                   help="side of the roll reference mirror: auto (default) fits both and takes "
+                   "the one the data support; right (the paper's text) or left: used as stated, "
+                   "with a warning when the data reject it")
+    p.add_argument("--azimuth-sense", choices=("auto", "same", "opposite"), default=None,
+                   help="theodolite azimuth turning the same way as the INS heading or the "
+                   "opposite way: auto (default) fits both and takes the one the data support")
+    p.add_argument("--verify", choices=("leave-one-out",), default=None,
+                   help="also check the 15″ claim out of sample: fit without each mirror in "
+                   "turn and apply the offsets to it")
     p.add_argument("--roll-sigma-deg", type=positive, default=None, metavar="DEG",
                    help="prior 1-sigma of each fitted roll (default 2)")
     p.add_argument("--ins-sigma-arcsec", type=nonnegative, metavar="S",
@@ -249,6 +348,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--theodolite-sigma-arcsec", type=nonnegative, metavar="S",
                    help="error of each theodolite angle (reference only)")
     p.set_defaults(func=_cmd_collimation_fit)
+
+    p = csub.add_parser("verify", help="apply a saved fit's offsets to another calibration "
+                        "and judge the 15″ claim on it (seed 003, section 3.2)")
+    p.add_argument("fit", help="JSON written by 'collimation fit --json' (--readings reference)")
+    p.add_argument("data", help="CSV of another calibration of the same device")
+    add_json_option(p, "the out-of-sample deviations and verdict")
+    p.set_defaults(func=_cmd_collimation_verify)
 
     p = csub.add_parser("simulate", help="write a simulated calibration CSV")
     p.add_argument("out", help="CSV file to write")
@@ -281,255 +387,3 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p = csub.add_parser("figures", help="plot seed 003 Figs. 3-6 and check the text's statements")
     p.add_argument("outdir", help="directory for fig3.png ... fig6.png")
     p.set_defaults(func=_cmd_collimation_figures)
-
-
-def fit_report(readings: MirrorData, result: Fit, source: str) -> dict[str, object]:
-    """JSON-ready summary of a fit: parameters, sigmas and residuals in arc-seconds."""
-    import numpy as np
-
-    from montecarlo.seed003.fit import consistency_angles
-    from montecarlo.seed003.model import EFFECTS, correct_readings
-
-    roll = readings.ins_roll if readings.ins_roll is not None else np.zeros_like(readings.ins_az)
-    params = result.params
-    corr_az, corr_el, _ = correct_readings(readings.ins_az, readings.ins_el, roll,
-                                           params["axis_az"], params["axis_el"])
-    consistency = consistency_angles(params, readings.theodolite_az, readings.theodolite_el,
-                                     readings.ins_az, readings.ins_el, roll)
-    before, after = result.residuals_before / ARCSEC, result.residuals / ARCSEC
-    mirrors = []
-    for i, (name, kind) in enumerate(zip(readings.mirror, readings.sets, strict=True)):
-        mirrors.append({
-            "mirror": name, "set": kind,
-            "residual_before_az_arcsec": before[i, 0], "residual_before_el_arcsec": before[i, 1],
-            "residual_after_az_arcsec": after[i, 0], "residual_after_el_arcsec": after[i, 1],
-            "consistency_after_arcsec": consistency[i] / ARCSEC,
-            "corrected_ins_az_deg": math.degrees(corr_az[i]),
-            "corrected_ins_el_deg": math.degrees(corr_el[i]),
-        })
-
-    def rms(r):
-        return {"az": float(np.sqrt(np.mean(r[:, 0] ** 2))),
-                "el": float(np.sqrt(np.mean(r[:, 1] ** 2))), "all": float(np.sqrt(np.mean(r ** 2)))}
-
-    return {
-        "system": "collimation",
-        "file": source,
-        "n_mirrors": len(readings.mirror),
-        "roll": "reported" if readings.ins_roll is not None else "assumed zero (level mount)",
-        "effects": [e for e in EFFECTS if set(EFFECTS[e]) <= set(result.names)],
-        "unit": "arcsec",
-        "parameters": {k: v / ARCSEC for k, v in params.items()},
-        "stderr": {k: v / ARCSEC for k, v in result.stderr.items()},
-        "covariance_arcsec2": (result.covariance / ARCSEC**2).tolist(),
-        "sigma_arcsec": {"heading": result.sigma[0] / ARCSEC, "pitch": result.sigma[1] / ARCSEC},
-        "sigma_source": result.sigma_source,
-        "chi2": result.chi2, "dof": result.dof, "chi2_red": result.chi2_red,
-        "passes_arcsec": [v / ARCSEC for v in result.passes],
-        "mirrors": mirrors,
-        "rms_arcsec": {"before": rms(before), "after": rms(after)},
-    }
-
-
-def format_report(report: Mapping[str, object]) -> str:
-    """Human-readable text of :func:`fit_report`."""
-    from montecarlo.seed003.model import EFFECTS
-
-    p, se = report["parameters"], report["stderr"]
-    sets = [m["set"] for m in report["mirrors"]]
-    lines = [
-        f"seed 003 axis calibration: {report['file']}, {report['n_mirrors']} mirrors "
-        f"({sets.count('azimuth')} azimuth, {sets.count('pitch')} pitch); "
-        f"INS roll {report['roll']}",
-        f"residual sigma: heading {report['sigma_arcsec']['heading']:.2f}″, pitch "
-        f"{report['sigma_arcsec']['pitch']:.2f}″ ({report['sigma_source']})",
-        "optical axis relative to the INS axis (±1σ):",
-        f"  axis_az  γ = {p['axis_az']:10.2f} ± {se['axis_az']:.2f} arc-seconds (right +)",
-        f"  axis_el  λ = {p['axis_el']:10.2f} ± {se['axis_el']:.2f} arc-seconds (up +)",
-        "reference terms:",
-    ]
-    for k in p:
-        if k in EFFECTS["axis_misalignment"]:
-            continue
-        if k == "frame_heading":
-            lines.append(f"  frame_heading = {p[k] / 3600:.6f}° ± {se[k]:.2f} arc-seconds")
-        else:
-            lines.append(f"  {k} = {p[k]:.2f} ± {se[k]:.2f} arc-seconds")
-    lines += [
-        "offset increment per pass (fit, correct, refit): "
-        + ", ".join(f"{v:.4f}″" for v in report["passes_arcsec"]),
-        f"chi2/dof = {report['chi2']:.2f}/{report['dof']} = {report['chi2_red']:.3f}",
-        "",
-        "per-mirror residuals, INS reading - model [arc-seconds]; consistency = angle between",
-        "corrected optical axis and mirror normal:",
-        f"{'mirror':>10} {'set':>8} {'before az':>10} {'before el':>10} {'after az':>9} "
-        f"{'after el':>9} {'consistency':>11}",
-    ]
-    for m in report["mirrors"]:
-        lines.append(
-            f"{m['mirror']:>10} {m['set']:>8} {m['residual_before_az_arcsec']:10.2f} "
-            f"{m['residual_before_el_arcsec']:10.2f} {m['residual_after_az_arcsec']:9.2f} "
-            f"{m['residual_after_el_arcsec']:9.2f} {m['consistency_after_arcsec']:11.2f}")
-    b, a = report["rms_arcsec"]["before"], report["rms_arcsec"]["after"]
-    lines.append(f"{'RMS':>10} {'':>8} {b['az']:10.2f} {b['el']:10.2f} {a['az']:9.2f} "
-                 f"{a['el']:9.2f}")
-    lines.append(f"RMS of all residuals: before {b['all']:.2f}″, after {a['all']:.2f}″")
-    return "\n".join(lines)
-
-
-def reference_report(readings: MirrorData, data: ProcedureData, result: ProcedureFit,
-                     source: str, free_roll: bool, roll_sigma: float) -> dict[str, object]:
-    """JSON-ready summary of a fit of the paper's procedure (arc-seconds unless named)."""
-    import numpy as np
-    from scipy.stats import chi2
-
-    from montecarlo.seed003.procedure import (
-        CLAIM,
-        corrected_and_theodolite,
-        heading_floor,
-        pitch_reach,
-    )
-
-    k = data.measured
-    names = [readings.mirror[i] for i in k]
-    sets = [readings.sets[i] for i in k]
-    c_az, c_el, t_az, t_el, rel_roll = corrected_and_theodolite(data, result)
-    before, after = result.residuals_before / ARCSEC, result.residuals / ARCSEC
-    dev_az = np.degrees(np.angle(np.exp(1j * (c_az - t_az)))) * 3600.0
-    dev_el = (c_el - t_el) / ARCSEC
-    mirrors = []
-    for i, name in enumerate(names):
-        ok = abs(dev_az[i]) <= CLAIM / ARCSEC and abs(dev_el[i]) <= CLAIM / ARCSEC
-        mirrors.append({
-            "mirror": name, "set": sets[i],
-            "theodolite_az_deg": math.degrees(t_az[i]), "theodolite_el_deg": math.degrees(t_el[i]),
-            "roll_deg": math.degrees(rel_roll[i]),
-            "residual_before_az_arcsec": before[i, 0], "residual_before_el_arcsec": before[i, 1],
-            "residual_after_az_arcsec": after[i, 0], "residual_after_el_arcsec": after[i, 1],
-            "corrected_ins_az_deg": math.degrees(c_az[i]),
-            "corrected_ins_el_deg": math.degrees(c_el[i]),
-            "deviation_az_arcsec": float(dev_az[i]), "deviation_el_arcsec": float(dev_el[i]),
-            "verdict": "within 15″" if ok else "exceeds 15″",
-        })
-
-    def rms(r):
-        return {"az": float(np.sqrt(np.mean(r[:, 0] ** 2))),
-                "el": float(np.sqrt(np.mean(r[:, 1] ** 2))), "all": float(np.sqrt(np.mean(r ** 2)))}
-
-    se = result.stderr
-    not_determined = []
-    for name in ("axis_az", "axis_el", "reference_az"):
-        if name in se and 2 * se[name] > CLAIM:
-            item = {"parameter": name, "stderr_arcsec": se[name] / ARCSEC}
-            if name == "axis_az":
-                pitch = np.array([s == "pitch" for s in sets])
-                reach = pitch_reach(data, result, pitch, free_roll, roll_sigma)
-                item["pitch_reach_deg"] = None if reach is None else math.degrees(reach)
-            not_determined.append(item)
-    floor = None
-    if result.roll_source.startswith("assumed"):
-        per_deg = heading_floor(data, result) * math.radians(1.0) / ARCSEC
-        floor = {"arcsec_per_deg_roll": per_deg}
-    worst = float(max(np.max(np.abs(dev_az)), np.max(np.abs(dev_el))))
-    return {
-        "system": "collimation",
-        "file": source,
-        "readings": "reference",
-        "reference": "reference rows (absolute readings)" if data.has_reference
-        else "no reference rows (readings relative to the reference)",
-        "roll_mirror": "right" if result.side > 0 else "left",
-        "n_mirrors": int(k.size),
-        "roll": result.roll_source,
-        "roll_prior_deg": math.degrees(roll_sigma) if result.names[-1].startswith("roll")
-        else None,
-        "unit": "arcsec",
-        "parameters": {n: v / ARCSEC for n, v in result.params.items()},
-        "stderr": {n: v / ARCSEC for n, v in se.items()},
-        "correlation": {"names": list(result.names), "matrix": result.correlation.tolist()},
-        "covariance_arcsec2": (result.covariance / ARCSEC**2).tolist(),
-        "sigma_arcsec": {"ins": result.sigma_ins / ARCSEC,
-                         "theodolite": result.sigma_theodolite / ARCSEC},
-        "sigma_source": result.sigma_source,
-        "chi2": result.chi2, "dof": result.dof, "chi2_red": result.chi2_red,
-        "chi2_p_value": float(chi2.sf(result.chi2, result.dof))
-        if result.sigma_source == "given" else None,
-        "not_determined": not_determined,
-        "heading_floor": floor,
-        "mirrors": mirrors,
-        "rms_arcsec": {"before": rms(before), "after": rms(after)},
-        "claim_15_arcsec": {"max_deviation_arcsec": worst, "holds": worst <= CLAIM / ARCSEC},
-    }
-
-
-def format_reference_report(report: Mapping[str, object]) -> str:
-    """Human-readable text of :func:`reference_report`."""
-    p, se = report["parameters"], report["stderr"]
-    sets = [m["set"] for m in report["mirrors"]]
-    sig = report["sigma_arcsec"]
-    lines = [
-        f"seed 003 axis calibration, the paper's procedure: {report['file']}, "
-        f"{report['n_mirrors']} mirrors ({sets.count('azimuth')} azimuth, "
-        f"{sets.count('pitch')} pitch); {report['reference']}; roll mirror on the "
-        f"{report['roll_mirror']}; INS roll {report['roll']}",
-        f"reading sigma: INS {sig['ins']:.2f}″, theodolite {sig['theodolite']:.2f}″ "
-        f"({report['sigma_source']})",
-        "optical axis relative to the INS axis (±1σ):",
-        f"  axis_az  γ = {p['axis_az']:10.2f} ± {se['axis_az']:.2f} arc-seconds (right +)",
-        f"  axis_el  λ = {p['axis_el']:10.2f} ± {se['axis_el']:.2f} arc-seconds (up +)",
-    ]
-    if "reference_az" in p:
-        lines.append(f"  reference azimuth (central mirror, theodolite) = "
-                     f"{p['reference_az'] / 3600:.6f}° ± {se['reference_az']:.2f} arc-seconds")
-    rolls = [n for n in p if n.startswith("roll")]
-    if rolls:
-        lines.append(f"  {len(rolls)} rolls fitted (prior 1σ {report['roll_prior_deg']:.2f}°): "
-                     + ", ".join(f"{p[n] / 3600:.3f}°" for n in rolls))
-    corr = report["correlation"]
-    i, j = corr["names"].index("axis_az"), corr["names"].index("axis_el")
-    lines.append(f"correlation γ-λ {corr['matrix'][i][j]:+.3f}"
-                 + ("" if "reference_az" not in corr["names"] else
-                    f", γ-reference azimuth "
-                    f"{corr['matrix'][i][corr['names'].index('reference_az')]:+.3f}"))
-    lines.append(f"chi2/dof = {report['chi2']:.2f}/{report['dof']} = {report['chi2_red']:.3f}")
-    if report["chi2_p_value"] is not None and report["chi2_p_value"] < 1e-3:
-        lines.append(f"MISFIT: χ² p-value {report['chi2_p_value']:.1e} with the given sigmas; "
-                     "check the reading model (--readings absolute if the INS readings are "
-                     "absolute and the file has no reference rows), the roll and the sigmas")
-    for item in report["not_determined"]:
-        text = (f"NOT DETERMINED: {item['parameter']} (σ {item['stderr_arcsec']:.1f}″, 2σ above "
-                "15″) by this mirror layout")
-        if "pitch_reach_deg" in item:
-            reach = item["pitch_reach_deg"]
-            text += ("; no pitch mirrors up to 85° would bring σ_γ to 7.5″" if reach is None else
-                     f"; pitch mirrors must reach about {reach:.0f}° for σ_γ ≤ 7.5″")
-        lines.append(text)
-    if report["heading_floor"] is not None:
-        f = report["heading_floor"]["arcsec_per_deg_roll"]
-        lines.append(f"INS roll not recorded: a level mount is assumed. A roll of 1° (1σ) at each "
-                     f"pointing would scatter the relative headings by {f:.1f}″ RMS at these "
-                     f"offsets ({2 * f:.1f}″ at 2°): the heading floor of this assumption. "
-                     "Record ins_roll_deg or use --free-roll.")
-    lines += [
-        "",
-        "per mirror [arc-seconds]: residuals (INS reading - model) before/after; corrected INS "
-        "reading (optical axis in the reference frame) vs theodolite:",
-        f"{'mirror':>8} {'set':>8} {'bef az':>8} {'bef el':>8} {'aft az':>7} {'aft el':>7} "
-        f"{'theo az°':>10} {'theo el°':>9} {'corr az°':>10} {'corr el°':>9} {'dev az':>7} "
-        f"{'dev el':>7}  verdict",
-    ]
-    for m in report["mirrors"]:
-        lines.append(
-            f"{m['mirror']:>8} {m['set']:>8} {m['residual_before_az_arcsec']:8.2f} "
-            f"{m['residual_before_el_arcsec']:8.2f} {m['residual_after_az_arcsec']:7.2f} "
-            f"{m['residual_after_el_arcsec']:7.2f} {m['theodolite_az_deg']:10.5f} "
-            f"{m['theodolite_el_deg']:9.5f} {m['corrected_ins_az_deg']:10.5f} "
-            f"{m['corrected_ins_el_deg']:9.5f} {m['deviation_az_arcsec']:7.2f} "
-            f"{m['deviation_el_arcsec']:7.2f}  {m['verdict']}")
-    b, a = report["rms_arcsec"]["before"], report["rms_arcsec"]["after"]
-    lines.append(f"{'RMS':>8} {'':>8} {b['az']:8.2f} {b['el']:8.2f} {a['az']:7.2f} {a['el']:7.2f}")
-    lines.append(f"RMS of all residuals: before {b['all']:.2f}″, after {a['all']:.2f}″")
-    claim = report["claim_15_arcsec"]
-    lines.append(f"largest deviation of a corrected reading from the theodolite: "
-                 f"{claim['max_deviation_arcsec']:.2f}″ -> the paper's 15″ claim "
-                 + ("holds" if claim["holds"] else "DOES NOT HOLD"))
-    return "\n".join(lines)

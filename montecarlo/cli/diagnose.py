@@ -58,11 +58,12 @@ def _check_files(args: argparse.Namespace) -> None:
 
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
-                      source: str, steps: Steps) -> int:
+                      source: str, steps: Steps, extra: dict | None = None,
+                      preface: tuple[str, ...] = ()) -> int:
     from montecarlo.discrepancy.view import format_text, to_json
     from montecarlo.output.provenance import provenance
 
-    report = to_json(d, view, source)
+    report = {**to_json(d, view, source), **(extra or {})}
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
     if getattr(args, "identifiability", False):
         from montecarlo.systems import identifiability
@@ -88,7 +89,7 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
         steps.report(to_stderr=True)
         return 0
-    print(format_text(report))
+    print("\n".join([*preface, format_text(report)]))
     if "identifiability" in report:
         from montecarlo.systems.identifiability import format_table
 
@@ -142,8 +143,11 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     sigma = args.angle_sigma_arcsec * ARCSEC
     if args.readings == "reference":
         return _diagnose_procedure(args, sigma, steps)
-    if args.roll_mirror is not None:
-        raise InputError("--roll-mirror: only with --readings reference")
+    for flag, used in (("--roll-mirror", args.roll_mirror),
+                       ("--azimuth-sense", args.azimuth_sense),
+                       ("--roll-sigma-deg", args.roll_sigma_deg)):
+        if used is not None:
+            raise InputError(f"{flag}: only with --readings reference")
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
     _check_separable(args.data, data)
@@ -220,28 +224,44 @@ def _cmd_diagnose_camera(args: argparse.Namespace) -> int:
 
 
 def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) -> int:
-    """``diagnose collimation --readings reference``: the procedure's reading model as base."""
+    """``diagnose collimation --readings reference``: the procedure's reading model as base.
+
+    The roll-mirror side and the azimuth sense are taken from the data under ``auto`` (the base
+    model fitted under each, the smallest chi-square, as ``collimation fit`` does), then the
+    diagnosis runs under them."""
+    import sys
+
     from montecarlo.discrepancy import procedure_effects as pe
     from montecarlo.discrepancy.engine import diagnose
     from montecarlo.discrepancy.fit import FitError
     from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, read_mirror_csv
-    from montecarlo.seed003.reference import SIDES
 
     data = read_mirror_csv(args.data, pe.min_mirrors(), "gamma, lambda (+ reference azimuth) "
                            "+ up to 2 parameters of an effect + 1 degree of freedom",
                            sets=SETS + REFERENCE_SETS)
-    side = SIDES[args.roll_mirror or "right"]
     measured = sum(s in SETS for s in data.sets)
     if measured < pe.min_mirrors():
         raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
                          f"{pe.min_mirrors()} needed")
+    prior = math.radians(2.0 if args.roll_sigma_deg is None else args.roll_sigma_deg)
     try:
+        data, side, choices = pe.choose_conventions(data, sigma, args.roll_mirror or "auto",
+                                                    args.azimuth_sense or "auto", prior)
         with steps("the diagnosis", fit_why(2 * measured, 4)):
-            d = diagnose(pe.procedure_problem(data, sigma, side), args.alpha)
+            d = diagnose(pe.procedure_problem(data, sigma, side, prior), args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data),
-                             steps)
+    for choice in choices.values():
+        line = choice.warning()
+        if line:
+            print(line, file=sys.stderr)
+    extra = {k: c.to_json() for k, c in choices.items()}
+    preface = tuple(f"{k.replace('_', ' ')}: {c.chosen} (stated {c.stated}; "
+                    + ", ".join(f"χ² {o} {v:.4g}" for o, v in c.chi2.items()) + "; "
+                    + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"
+                    for k, c in choices.items())
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data), steps,
+                             extra, preface)
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:
@@ -366,13 +386,15 @@ def _synth_procedure(args: argparse.Namespace) -> int:
     axis = next(c for c in ce.CANDIDATES if c.name == "axis_misalignment")
     candidates = {axis.name: axis, **{c.name: c for c in pe.CANDIDATES}}
     effects = synth.parse_effects(args.effect, candidates, pe.display_unit)
-    at_mdb = synth.parse_multiples(args.at_mdb, {c.name: c for c in pe.CANDIDATES})
+    side = SIDES[args.roll_mirror or "right"]
+    layout = pe.paper_layout(rows, azimuths, pitches, side)
+    at_mdb = synth.parse_multiples(args.at_mdb, {**{c.name: c for c in pe.CANDIDATES},
+                                                 pe.ROLL: pe.roll_effect(layout)})
     ins = args.ins_sigma_arcsec * ARCSEC
     noise = Noise(args.theodolite_sigma_arcsec * ARCSEC, ins, ins, ins,
                   math.radians(args.mount_roll_sigma_deg))
-    side = SIDES[args.roll_mirror or "right"]
     data, truth = synth.synth_procedure(
-        seed=args.seed, layout=pe.paper_layout(rows, azimuths, pitches, side),
+        seed=args.seed, layout=layout,
         frame_heading=math.radians(args.frame_heading_deg), noise=noise, effects=effects,
         at_mdb=at_mdb, side=side,
         with_roll=args.with_roll or (rows and args.mount_roll_sigma_deg > 0))
@@ -444,8 +466,16 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="reference (default): the paper's procedure, readings relative to the "
                    "INS's reference (reference rows, or relative readings); absolute: the "
                    "absolute-reading model")
-    p.add_argument("--roll-mirror", choices=("right", "left"), default=None,
-                   help="side of the roll reference mirror (--readings reference; right)")
+    p.add_argument("--roll-mirror", choices=("auto", "right", "left"), default=None,
+                   help="side of the roll reference mirror (--readings reference): auto "
+                   "(default) takes the side the data support; right (the paper's text) or left "
+                   "as stated, with a warning when the data reject it")
+    p.add_argument("--azimuth-sense", choices=("auto", "same", "opposite"), default=None,
+                   help="theodolite azimuth turning the same way as the INS heading or not "
+                   "(--readings reference; auto by default)")
+    p.add_argument("--roll-sigma-deg", type=positive, default=None, metavar="DEG",
+                   help="size (1σ) of an unrecorded INS roll, the ins_roll candidate's prior "
+                   "(--readings reference; default 2)")
     common(p)
     p.set_defaults(func=_cmd_diagnose_collimation)
 

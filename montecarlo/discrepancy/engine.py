@@ -26,7 +26,8 @@ snooping, Teunissen's DIA):
    inside the winner's column space with fewer parameters that explains its signal (alone or
    with one other candidate) is adapted instead: the group's minimal parametrisation
    (:func:`minimal_member`); the groups reported are those of the final model.
-4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2.
+4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2 (a winner
+   whose adapted model is singular is not adapted but dropped, with p = NaN).
 
 The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the whole chain
 detects and identifies it with probability ``power`` (0.80): the noncentrality ``lambda0`` is the
@@ -588,9 +589,17 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
         for p, v in win.estimate.items():
             lo, hi = effect.bounds[effect.parameters.index(p)]
             start[p] = float(np.clip(v, lo, hi))
-        fixed |= set(effect.parameters) - set(win.active)
         tested = fit
-        fit = _fit_with_fixed(full, (*fit.effects[1:], win.name), start, fixed)
+        try:
+            fit = _fit_with_fixed(full, (*fit.effects[1:], win.name), start,
+                                  fixed | (set(effect.parameters) - set(win.active)))
+        except (FitError, np.linalg.LinAlgError):
+            # the adapted model is singular with these data (an effect nearly degenerate with
+            # the model, e.g. a roll per pointing with the offsets' direction): not adapted
+            dropped[win.name] = math.nan
+            fit = tested
+            continue
+        fixed |= set(effect.parameters) - set(win.active)
         if is_outlier(win.name):
             outliers.append(win)
             steps.append(Step(tested, tests, win.name, (), snoop))

@@ -84,5 +84,9 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
     s = np.linalg.svd(A / np.where(norms > 0, norms, 1.0), compute_uv=False)
     if norms.min() == 0.0 or s[-1] < 1e-10 * s[0]:
         raise FitError(f"parameters of {', '.join(model)} are not separable with these data")
-    cov = np.linalg.inv(A.T @ A)
+    try:
+        cov = np.linalg.inv(A.T @ A)
+    except np.linalg.LinAlgError:  # condition of A'A, the square of A's, beyond double precision
+        raise FitError(f"parameters of {', '.join(model)} are not separable with these "
+                       "data") from None
     return LeastSquaresFit(names, sol.x, cov, fun(sol.x), A, effects=model)

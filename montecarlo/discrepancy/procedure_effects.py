@@ -43,11 +43,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.io.collimation_csv import MirrorData, procedure_data
 from montecarlo.lsq import LeastSquaresFit
+from montecarlo.seed003 import conventions as cv
 from montecarlo.seed003 import reference as ref
+from montecarlo.seed003.conventions import Choice
 from montecarlo.seed003.model import (
     Noise,
     attitude_angles,
@@ -84,11 +87,48 @@ CANDIDATES = (*(c for c in ce.CANDIDATES if c.name not in ("axis_misalignment",)
               READING_MODEL)
 
 TRUTH_KEYS = tuple(p for c in CANDIDATES for p in c.parameters)
-"""Parameters of every candidate effect."""
+"""Parameters of every candidate effect that does not depend on the data (all but ``ins_roll``)."""
+
+ROLL = "ins_roll"
+"""The unrecorded (or misrecorded) INS roll: one roll per pointing but the central one."""
+
+ROLL_PRIOR = math.radians(2.0)
+"""Default size (1 sigma) of an unrecorded roll [rad]; the candidate's physical bound is 3 sigma."""
+
+
+def roll_parameters(data: MirrorData) -> tuple[str, ...]:
+    """Parameters of ``ins_roll``: the roll at the roll reference pointing and at each measured
+    mirror [rad], added to the recorded (or assumed zero) roll. The central pointing's roll is
+    not one of them: a roll common to all pointings turns the offset about the INS axis, which
+    gamma and lambda already describe (docs/collimation.md, "Free rolls")."""
+    pd = procedure_data(data)
+    return ("ins_roll_reference_roll",
+            *(f"ins_roll_{data.mirror[i]}" for i in pd.measured))
+
+
+def roll_effect(data: MirrorData, prior: float = ROLL_PRIOR) -> Effect:
+    """The ``ins_roll`` candidate of these data, each roll within +-3 ``prior`` [rad]."""
+    names = roll_parameters(data)
+    return Effect(ROLL, names, ((-3.0 * prior, 3.0 * prior),) * len(names), (1e-6,) * len(names),
+                  "INS roll not recorded: one roll per pointing (the central one the reference) "
+                  f"within +-{3 * math.degrees(prior):.3g} deg [rad]",
+                  tuple((-1.0) ** j for j in range(len(names))))
+
+
+def _roll_offsets(params: Mapping[str, ArrayLike], data: MirrorData) -> FloatArray | float:
+    """The ``ins_roll`` values at the pointings [centre (0), roll mirror, measured...] [rad],
+    shape (..., n); 0.0 when none is given."""
+    values = [params.get(n) for n in roll_parameters(data)]
+    if all(v is None for v in values):
+        return 0.0
+    values = [np.asarray(0.0 if v is None else v, float) for v in values]
+    batch = next((v.shape[:-1] for v in values if v.ndim), ())
+    return np.concatenate([np.zeros((*batch, 1)),
+                           *(np.broadcast_to(v, (*batch, 1)) for v in values)], axis=-1)
 
 
 def display_unit(name: str) -> tuple[str, float]:
-    if name == "reference_az":
+    if name == "reference_az" or name.startswith("ins_roll_"):
         return "deg", math.pi / 180.0
     if name in READING_MODEL.parameters:
         return "arcsec", ARCSEC
@@ -202,13 +242,13 @@ def reported_attitudes(params: Mapping[str, ArrayLike], data: MirrorData, side: 
         else:
             rolls = np.concatenate([np.zeros(2), data.ins_roll[rows]])
             relative_roll = True
-    rolls = np.asarray(rolls, float)
+    rolls = np.asarray(rolls, float) + _roll_offsets(params, data)
     if relative_roll:
-        C_ref = ref.attitude_at(gamma, lam, az[..., :2], el[..., :2], rolls[:2])
+        C_ref = ref.attitude_at(gamma, lam, az[..., :2], el[..., :2], rolls[..., :2])
         C_R = ref.reference_frame(C_ref[..., 0, :, :], C_ref[..., 1, :, :], side)
         w_k = np.einsum("...ij,...mi->...mj", C_R, direction(az[..., 2:], el[..., 2:]))
-        h_k, p_k = autocollimate(direction(gamma, lam), w_k, rolls[2:])
-        C_k = C_R[..., None, :, :] @ attitude_matrix(h_k, p_k, rolls[2:])
+        h_k, p_k = autocollimate(direction(gamma, lam), w_k, rolls[..., 2:])
+        C_k = C_R[..., None, :, :] @ attitude_matrix(h_k, p_k, rolls[..., 2:])
         C = np.concatenate([C_ref, C_k], axis=-3)
     else:
         C = ref.attitude_at(gamma, lam, az, el, rolls)
@@ -289,10 +329,12 @@ def start_values(data: MirrorData) -> dict[str, float]:
         1j * (data.theodolite_az[k] - data.ins_az[k])))))}
 
 
-def procedure_problem(data: MirrorData, angle_sigma: float, side: float = 1.0) -> Problem:
+def procedure_problem(data: MirrorData, angle_sigma: float, side: float = 1.0,
+                      roll_prior: float = ROLL_PRIOR) -> Problem:
     """The DIA problem of one calibration by the procedure; ``angle_sigma`` is the error of a
     heading or pitch residual of a mirror without reference rows, ``hypot`` of the theodolite's
-    and the INS's (each taken as ``angle_sigma / sqrt 2``)."""
+    and the INS's (each taken as ``angle_sigma / sqrt 2``). ``roll_prior`` [rad] sizes the
+    ``ins_roll`` candidate (:func:`roll_effect`)."""
     pd = procedure_data(data)
     k = pd.measured
     start = start_values(data)
@@ -309,8 +351,48 @@ def procedure_problem(data: MirrorData, angle_sigma: float, side: float = 1.0) -
     observations = tuple((data.mirror[i], j + 1, (j, m + j)) for j, i in enumerate(k))
     unavailable = {"reading_model": "with reference rows the readings are absolute by "
                    "definition"} if pd.has_reference else {}
-    return Problem("collimation", base_effect(pd.has_reference), CANDIDATES, residuals, start,
+    return Problem("collimation", base_effect(pd.has_reference),
+                   (*CANDIDATES, roll_effect(data, roll_prior)), residuals, start,
                    unavailable, observations)
+
+
+def choose_conventions(data: MirrorData, angle_sigma: float, side: str = "auto",
+                       sense: str = "auto", roll_prior: float = ROLL_PRIOR
+                       ) -> tuple[MirrorData, float, dict[str, Choice]]:
+    """The roll-mirror side and azimuth sense the data support (:mod:`montecarlo.seed003.
+    conventions`): the base model fitted under each, the smallest chi-square taken under
+    ``"auto"``. Returns the data (theodolite azimuths turned for an ``opposite`` sense), the
+    side's sign and the two :class:`~montecarlo.seed003.conventions.Choice`."""
+    senses = list(cv.SENSES) if sense == "auto" else [sense]
+    chi2: dict[tuple[str, str], float] = {}
+    for sn in senses:
+        turned = dataclasses.replace(data, theodolite_az=cv.SENSES[sn] * data.theodolite_az)
+        for sd, sign in ref.SIDES.items():
+            try:
+                f = fit_model(procedure_problem(turned, angle_sigma, sign, roll_prior), ())
+            except (FitError, ValueError, np.linalg.LinAlgError):
+                chi2[sd, sn] = math.inf
+                continue
+            chi2[sd, sn] = f.chi2
+    if not any(math.isfinite(v) for v in chi2.values()):
+        raise FitError("the base model cannot be fitted under any convention")
+    by_sense = {sn: min(chi2[sd, sn] for sd in ref.SIDES) for sn in senses}
+    if len(senses) == 1:
+        sense_choice = cv.Choice("azimuth_sense", sense, sense, by_sense, False,
+                                 "stated, not compared")
+    else:
+        sense_choice = cv.decide("azimuth_sense", by_sense, cv.STATED_SENSE, None, 1.0,
+                                 "the azimuth mirrors cannot tell the senses apart")
+    sn = sense_choice.chosen
+    side_choice = cv.decide("roll_mirror", {sd: chi2[sd, sn] for sd in ref.SIDES},
+                            cv.STATED_SIDE if side == "auto" else side,
+                            None if side == "auto" else side, 1.0,
+                            "with reference rows the side does not change the fit"
+                            if procedure_data(data).has_reference else
+                            "the readings do not depend on the side")
+    turned = dataclasses.replace(data, theodolite_az=cv.SENSES[sn] * data.theodolite_az)
+    return turned, ref.SIDES[side_choice.chosen], {"roll_mirror": side_choice,
+                                                   "azimuth_sense": sense_choice}
 
 
 def min_mirrors() -> int:
@@ -336,7 +418,10 @@ def simulate(layout: MirrorData, truth: Mapping[str, float], noise: Noise,
     n_point = pd.measured.size + 2
     rolls = noise.mount_roll * rng.standard_normal(n_point)
     plain = dataclasses.replace(layout, ins_roll=None)
-    heading, pitch = reported_attitudes(truth, plain, side, rolls)
+    # the INS autocollimates on the true normals: the collimation changes only what the
+    # theodolite reads (below), not where the mirrors are
+    seen = {k: v for k, v in truth.items() if k != "theodolite_c"}
+    heading, pitch = reported_attitudes(seen, plain, side, rolls)
     heading = heading + noise.ins_heading * rng.standard_normal(n_point)
     pitch = pitch + noise.ins_pitch * rng.standard_normal(n_point)
     _, _, rows = _pointings(truth, plain, side)
@@ -403,7 +488,8 @@ def report_view(data: MirrorData, angle_sigma: float, side: float = 1.0) -> Syst
                 "ins_sigma": angle_sigma / math.sqrt(2.0), "mount_roll_sigma": 0.0,
                 **{q: float(values.get(q, 0.0)) for q in ("axis_az", "axis_el",
                                                           "reference_az", *TRUTH_KEYS)},
-                "fit_effects": ",".join(e for e in fit.effects[1:] if not is_outlier(e)),
+                "fit_effects": ",".join(e for e in fit.effects[1:]
+                                        if not is_outlier(e) and e != ROLL),
                 "diagnose": 0}
 
     return SystemView("collimation", display_unit, "arcsec", ARCSEC,

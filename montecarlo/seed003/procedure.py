@@ -443,6 +443,15 @@ def _reference_pointings(data: ProcedureData, fit: ProcedureFit):
             (float(ref.roll_mirror_azimuth(az_c, fit.side)), 0.0, fit.rolls[m + 1]))
 
 
+def central_azimuth(data: ProcedureData, fit: ProcedureFit) -> float:
+    """Theodolite azimuth of the central reference mirror [rad]: its row's reading, or the
+    fitted ``reference_az`` when the file has no reference rows. Adding it to an azimuth
+    relative to the central mirror gives the azimuth in the frame of the file's theodolite
+    readings (the frame of the paper's table, whose theodolite column is relative to the
+    central reference mirror)."""
+    return float(_reference_pointings(data, fit)[0][0])
+
+
 def corrected_and_theodolite(data: ProcedureData, fit: ProcedureFit
                              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Corrected INS readings and the theodolite's relative angles at the measured mirrors [rad].

@@ -43,7 +43,8 @@ from montecarlo.seed003.model import (
 FloatArray = NDArray[np.float64]
 
 SIDES = {"right": 1.0, "left": -1.0}
-"""Sign ``s`` of ``x_R`` for the roll mirror's side (the paper's is on the right)."""
+"""Sign ``s`` of ``x_R`` for the roll mirror's side (the text states right; the data decide,
+:mod:`montecarlo.seed003.conventions`)."""
 
 
 def _t(C: FloatArray) -> FloatArray:
@@ -125,7 +126,7 @@ def relative_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, el:
     center, roll_mirror : (az, el, roll) [rad]
         Theodolite angles of the central and the roll reference mirror and the INS's absolute
         roll at those pointings; shaped like ``axis_az``.
-    side : +1 (roll mirror on the right, the paper's) or -1 (left).
+    side : +1 (roll mirror on the right, as the text states) or -1 (left).
 
     Returns
     -------
