@@ -17,8 +17,9 @@ install: $(STAMP)
 run: install
 	$(BIN)/montecarlo run studies/table1.toml
 
+# the default tests in one process per core, each test file kept in one process
 test: install lint
-	$(BIN)/pytest -m "not slow"
+	$(BIN)/pytest -m "not slow" -n auto --dist loadfile
 
 test-all: install lint
 	$(BIN)/pytest

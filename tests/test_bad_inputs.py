@@ -698,8 +698,22 @@ CASES: list[Case] = [
 ]
 
 
+FAST_STUDY_CASES = frozenset({
+    "study-unknown-key-typo-H_mm", "study-wrong-type-string-number", "study-missing-required-H_m",
+    "study-toml-syntax-bad-number", "study-nan-value", "study-sweep-zip-lengths-differ",
+    "study-spec-unknown-metric", "study-name-with-path", "study-empty-file", "study-binary-file",
+    "study-air-unknown-param", "study-collimation-negative-mirrors",
+    "study-stabilization-wrong-type", "study-path-missing", "study-negative-base-replaced-by-sweep",
+    "study-byte-order-mark"})
+"""The study-file cases of the default run: one of each kind of mistake and of each system. The
+other study-file cases take the same validation and error path as these; they run with the slow
+tests (``make test-all``), which keeps the default run within its time."""
+
+
 def _param(case: Case):
     marks = [pytest.mark.xfail(reason=case.defect, strict=True)] if case.defect else []
+    if case.id.startswith("study-") and case.id not in FAST_STUDY_CASES:
+        marks.append(pytest.mark.slow)
     return pytest.param(case, id=case.id, marks=marks)
 
 
