@@ -1,5 +1,8 @@
 """Acceptance of ``diagnose camera`` on data of the blind second generator (camera_blind.py).
 
+This harness is the package's own (not blind); the generator it drives was written by a second
+author given only the CSV format and the published Zhang / Brown-Conrady models (its header).
+
 Every data set goes through the CSV files, written by ``camera_blind.write`` and read back by
 :func:`montecarlo.io.camera_csv.read_camera_csv`, so the reader's conventions meet the
 generator's: target ids ``row * nx + col`` in millimetres (not centred), pixel centres at
