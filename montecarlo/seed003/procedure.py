@@ -286,6 +286,21 @@ def _fit_from_starts(model: _Model, free: NDArray[np.intp], sigma_ins: float,
     return best
 
 
+def _rolls(model: _Model, data: ProcedureData, x: FloatArray, free_roll: bool
+           ) -> tuple[FloatArray, str]:
+    """The absolute roll at every pointing of a solution ``x`` [rad] and where it came from:
+    fitted, recorded, recorded with the reference pointings fitted, or assumed zero."""
+    if free_roll:
+        return x[model.n_core:], "fitted (one per pointing)"
+    if model.recorded_roll and data.has_reference:
+        return data.ins_roll[model.rows], "recorded"
+    if model.recorded_roll:
+        return (np.concatenate([data.ins_roll[model.rows], x[model.n_core:]]),
+                "recorded (relative); at the reference mirrors fitted")
+    return np.zeros(model.rows.size + (0 if data.has_reference else 2)), \
+        "assumed zero (level mount)"
+
+
 def fit_procedure(data: ProcedureData, *, side: float = 1.0, free_roll: bool = False,
                   roll_sigma: float = math.radians(2.0), sigma_ins: float | None = None,
                   sigma_theodolite: float | None = None, before: bool = True) -> ProcedureFit:
@@ -342,18 +357,7 @@ def fit_procedure(data: ProcedureData, *, side: float = 1.0, free_roll: bool = F
     res = model.residuals(x, model.z0)
     res_before = model.residuals(x_before, model.z0) if before else np.full_like(res, np.nan)
     m = model.m
-    if free_roll:
-        rolls = x[model.n_core:]
-        source = "fitted (one per pointing)"
-    elif model.recorded_roll and data.has_reference:
-        rolls = data.ins_roll[model.rows]
-        source = "recorded"
-    elif model.recorded_roll:
-        rolls = np.concatenate([data.ins_roll[model.rows], x[model.n_core:]])
-        source = "recorded (relative); at the reference mirrors fitted"
-    else:
-        rolls = np.zeros(model.rows.size + (0 if data.has_reference else 2))
-        source = "assumed zero (level mount)"
+    rolls, source = _rolls(model, data, x, free_roll)
     return ProcedureFit(names=model.names, values=x, covariance=cov, sigma_ins=s_ins,
                         sigma_theodolite=s_theo,
                         sigma_source="given" if given else "a posteriori",

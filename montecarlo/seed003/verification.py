@@ -27,6 +27,7 @@ from montecarlo.seed003.procedure import (
     ProcedureData,
     ProcedureFit,
     _Model,
+    _rolls,
     _solve,
     _start,
     corrected_and_theodolite,
@@ -60,16 +61,7 @@ def apply_offsets(data: ProcedureData, axis_az: float, axis_el: float, *, side: 
         w = np.linalg.solve(L, model.residuals(x, model.z0))
     res = model.residuals(x, model.z0)
     m = model.m
-    if free_roll:
-        rolls, source = x[model.n_core:], "fitted (one per pointing)"
-    elif model.recorded_roll and data.has_reference:
-        rolls, source = data.ins_roll[model.rows], "recorded"
-    elif model.recorded_roll:
-        rolls = np.concatenate([data.ins_roll[model.rows], x[model.n_core:]])
-        source = "recorded (relative); at the reference mirrors fitted"
-    else:
-        rolls = np.zeros(model.rows.size + (0 if data.has_reference else 2))
-        source = "assumed zero (level mount)"
+    rolls, source = _rolls(model, data, x, free_roll)
     dof = 2 * m + model.n_prior - free.size
     return ProcedureFit(names=model.names, values=x, covariance=cov, sigma_ins=sigma_ins,
                         sigma_theodolite=sigma_theodolite, sigma_source="given",

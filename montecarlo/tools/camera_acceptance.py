@@ -145,6 +145,18 @@ def run(sets: int, seed: int = 2026, sigma: float = 0.2, grid: int = 8,
     return summarise(rows)
 
 
+def format_table(table: dict[str, dict[str, float]]) -> str:
+    """The acceptance rates per scenario as a Markdown table (``sets`` as a count)."""
+    keys = ("sets", "anything_named", "right_named", "only_right", "any_corner_flagged",
+            "right_corner_flagged", "other_corner_flagged")
+    lines = ["| scenario | " + " | ".join(keys) + " |", "|---" * (len(keys) + 1) + "|"]
+    for s, e in table.items():
+        lines.append(f"| {s} | " + " | ".join(
+            "" if k not in e else (f"{e[k]:.0f}" if k == "sets" else f"{e[k]:.3f}")
+            for k in keys) + " |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sets", type=int, default=200)
@@ -155,14 +167,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--n-jobs", type=int, default=1)
     args = p.parse_args(argv)
     table = run(args.sets, args.seed, args.sigma, args.grid, args.multiple, args.n_jobs)
-    keys = ("sets", "anything_named", "right_named", "only_right", "any_corner_flagged",
-            "right_corner_flagged", "other_corner_flagged")
-    print("| scenario | " + " | ".join(keys) + " |")
-    print("|---" * (len(keys) + 1) + "|")
-    for s, e in table.items():
-        print(f"| {s} | " + " | ".join("" if k not in e else (f"{e[k]:.0f}" if k == "sets"
-                                                              else f"{e[k]:.3f}")
-                                       for k in keys) + " |")
+    print(format_table(table))
 
 
 if __name__ == "__main__":

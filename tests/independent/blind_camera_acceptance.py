@@ -46,7 +46,7 @@ from montecarlo.discrepancy.engine import ALPHA, analyse_candidates, diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.discrepancy.problem import OUTLIER, with_outliers
 from montecarlo.io.camera_csv import CameraData, read_camera_csv
-from montecarlo.tools.camera_acceptance import SCENARIOS, summarise
+from montecarlo.tools.camera_acceptance import SCENARIOS, format_table, summarise
 
 from . import camera_blind as cb
 
@@ -129,14 +129,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--n-jobs", type=int, default=1)
     args = p.parse_args(argv)
     table = run(args.sets, args.seed, args.sigma, args.multiple, args.grid, args.n_jobs)
-    keys = ("sets", "anything_named", "right_named", "only_right", "any_corner_flagged",
-            "right_corner_flagged", "other_corner_flagged")
-    print("| scenario | " + " | ".join(keys) + " |")
-    print("|---" * (len(keys) + 1) + "|")
-    for s, e in table.items():
-        print(f"| {s} | " + " | ".join("" if k not in e else (f"{e[k]:.0f}" if k == "sets"
-                                                              else f"{e[k]:.3f}")
-                                       for k in keys) + " |")
+    print(format_table(table))
 
 
 if __name__ == "__main__":
