@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from montecarlo.discrepancy import collimation_effects as ce
+from montecarlo.discrepancy.candidate_tests import analyse_candidates, canonical_correlation
 from montecarlo.discrepancy.design import TRIAL_METRICS
-from montecarlo.discrepancy.engine import analyse_candidates, canonical_correlation, diagnose
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.errors import InputError
 from montecarlo.io.collimation_csv import MirrorData, read_mirror_csv, write_mirror_csv

@@ -16,8 +16,9 @@ from scipy import stats
 
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy.confounding import contained
 from montecarlo.discrepancy.design import inject_at_mdb
-from montecarlo.discrepancy.engine import contained, diagnose
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.discrepancy.view import GENERIC_SEPARATION, format_text, to_json
 from montecarlo.geometry.camera import Camera

@@ -9,7 +9,8 @@ import pytest
 
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
-from montecarlo.discrepancy.engine import diagnose, wald_test
+from montecarlo.discrepancy.candidate_tests import wald_test
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.discrepancy.problem import outlier_effect, with_outliers
 from montecarlo.geometry.camera import Camera
@@ -207,7 +208,8 @@ def test_a_pair_of_effects_explains_an_observation_only_when_it_is_needed_beside
     (u orthogonal to e0, spread over the other observations). Neither effect alone explains
     a spike at observation 0, the pair does; the pair comes first only when the data also
     carry a signal along u that the observation cannot explain."""
-    from montecarlo.discrepancy.engine import CandidateTest, effect_for_observation
+    from montecarlo.discrepancy.candidate_tests import CandidateTest
+    from montecarlo.discrepancy.confounding import effect_for_observation
 
     rng = np.random.default_rng(5)
     n = 30

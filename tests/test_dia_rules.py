@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from montecarlo.discrepancy import engine
-from montecarlo.discrepancy.engine import Diagnosis, analyse_candidates, diagnose, holm
+from montecarlo.discrepancy import candidate_tests, engine
+from montecarlo.discrepancy.candidate_tests import analyse_candidates, holm
+from montecarlo.discrepancy.engine import Diagnosis, diagnose
 from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Effect, Problem, with_outliers
 
@@ -351,7 +352,7 @@ def test_undetectable_where_the_largest_noncentrality_is_half_lambda0():
     Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
     g = X**2 - Q @ (Q.T @ X**2)
     g /= np.linalg.norm(g)
-    lam0 = max(engine.noncentrality(0.01, N - 2), engine.noncentrality(0.01, 1))
+    lam0 = max(candidate_tests.noncentrality(0.01, N - 2), candidate_tests.noncentrality(0.01, 1))
     bound = math.sqrt(lam0 / 2.0)
     problem = linear(y, {"weak": {"s": g}}, bounds={"s": (-bound, bound)})
     t = analyse_candidates(problem, fit_model(problem, ()))[0]
@@ -408,7 +409,7 @@ def test_the_column_basis_has_the_same_rank_at_any_scale():
     V = np.linalg.qr(rng.standard_normal((3, 3)))[0]
     M = U @ np.diag([1.0, 1e-6, 1e-15]) @ V.T
     for scale in (1e-9, 1.0, 1e6):
-        B = engine._orthonormal(scale * M)
+        B = candidate_tests._orthonormal(scale * M)
         assert B.shape == (N, 2)
         np.testing.assert_allclose(B.T @ B, np.eye(2), atol=1e-9)
 
@@ -490,7 +491,8 @@ def test_observation_tests_use_the_power_and_absorption_level_given():
     d = diagnose(problem, power=0.5)
     snoop = d.steps[0].snoop
     assert d.named == [] and len(snoop) == N and all(t.status == "testable" for t in snoop)
-    lam0 = max(engine.noncentrality(0.01, N - 2, 0.5), engine.noncentrality(0.01 / N, 1, 0.5))
+    lam0 = max(candidate_tests.noncentrality(0.01, N - 2, 0.5),
+               candidate_tests.noncentrality(0.01 / N, 1, 0.5))
     assert all(t.lambda0 == pytest.approx(lam0, rel=1e-12) for t in snoop)
     d = diagnose(problem, absorbed=0.99)
     assert all(t.status == "absorbed" for t in d.steps[0].snoop)

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from montecarlo.discrepancy import stabilization_effects as ste
-from montecarlo.discrepancy.engine import canonical_correlation, diagnose
+from montecarlo.discrepancy.candidate_tests import canonical_correlation
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.seed001 import estimate as se
 from montecarlo.seed001 import kinematics as kin
 from montecarlo.seed001 import linear_model as lin

@@ -14,18 +14,18 @@ import pytest
 from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
-from montecarlo.discrepancy.design import design_mdb
-from montecarlo.discrepancy.engine import (
+from montecarlo.discrepancy.candidate_tests import (
     analyse_candidates,
     canonical_correlation,
     chi2_red_band,
-    diagnose,
     holm,
     log_chi2_sf,
     log_chi2_sf_asymptotic,
     noncentrality,
-    separated,
 )
+from montecarlo.discrepancy.confounding import separated
+from montecarlo.discrepancy.design import design_mdb
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem
 

@@ -8,8 +8,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy.candidate_tests import analyse_candidates, canonical_correlation
 from montecarlo.discrepancy.design import TRIAL_METRICS
-from montecarlo.discrepancy.engine import analyse_candidates, canonical_correlation, diagnose
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.errors import InputError
 from montecarlo.geometry.camera import Camera

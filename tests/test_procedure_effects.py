@@ -12,8 +12,9 @@ from scipy.spatial.transform import Rotation
 from montecarlo.cli import main
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import procedure_effects as pe
+from montecarlo.discrepancy.candidate_tests import analyse_candidates
 from montecarlo.discrepancy.design import inject_at_mdb
-from montecarlo.discrepancy.engine import analyse_candidates, diagnose
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.io.collimation_csv import procedure_data, read_mirror_csv
 from montecarlo.seed003 import reference as ref

@@ -10,7 +10,8 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from montecarlo.discrepancy.engine import ALPHA, POWER, analyse_candidates, chi2_red_band, diagnose
+from montecarlo.discrepancy.candidate_tests import ALPHA, POWER, analyse_candidates, chi2_red_band
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Problem
 from montecarlo.lsq import LeastSquaresFit

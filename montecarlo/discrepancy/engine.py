@@ -50,360 +50,32 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize, stats
+from scipy import stats
 
-from montecarlo.discrepancy.fit import FitError, fit_model, jacobian
+from montecarlo.discrepancy.candidate_tests import (
+    ABSORBED,
+    ALPHA,
+    CONFOUNDED,
+    POWER,
+    CandidateTest,
+    analyse_candidates,
+    canonical_correlation,
+    holm,
+    wald_test,
+)
+from montecarlo.discrepancy.confounding import (
+    effect_for_observation,
+    minimal_member,
+    separated,
+)
+from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier, with_outliers
 from montecarlo.lsq import LeastSquaresFit
 
 FloatArray = NDArray[np.float64]
-
-ALPHA = 0.01
-"""Significance of the global test and family-wise error of the identification."""
-POWER = 0.80
-"""Power at which the minimal detectable bias is defined (Baarda's beta0 = 0.80)."""
-ABSORBED = 0.05
-"""A projected column keeping less than this fraction of its norm is absorbed."""
-CONFOUNDED = 0.9
-"""Candidates whose statistics correlate above this form a confounded group."""
-# --------------------------------------------------------------------------- identification
-
-
-def holm(p_values: Sequence[float]) -> FloatArray:
-    """Holm's step-down adjusted p-values (reject where adjusted < alpha).
-
-    ``p_(i) (m - i + 1)`` for the i-th smallest, made monotone and capped at 1; equals
-    ``statsmodels.stats.multitest.multipletests(method="holm")`` (which also runs a garbage
-    collection on every call, 100 ms here, too slow for Monte Carlo loops).
-    """
-    p = np.asarray(p_values, float)
-    order = np.argsort(p, kind="stable")
-    m = p.size
-    stepped = np.minimum(1.0, np.maximum.accumulate(p[order] * (m - np.arange(m))))
-    out = np.empty(m)
-    out[order] = stepped
-    return out
-
-
-@lru_cache(maxsize=4096)
-def noncentrality(alpha: float, dof: int, power: float = POWER) -> float:
-    """Noncentrality ``lambda`` at which a chi2(dof) test of size ``alpha`` has ``power``.
-
-    Solves ``P(chi2'(dof, lambda) > chi2_{1-alpha}(dof)) = power`` (Baarda's lambda0).
-    """
-    crit = stats.chi2.isf(alpha, dof)
-
-    def gap(lam: float) -> float:
-        return float(stats.ncx2.sf(crit, dof, lam)) - power
-
-    hi = 1.0
-    while gap(hi) < 0:
-        hi *= 2.0
-    return float(optimize.brentq(gap, 1e-12, hi, xtol=1e-10))
-
-
-def log_chi2_sf(x: float, dof: int) -> float:
-    """``log P(chi2(dof) > x)``, finite far into the tail (for ranking huge statistics).
-
-    scipy's ``chi2.logsf`` underflows to -inf near x = 1500; beyond that the asymptotic series
-    of the upper incomplete gamma function is used,
-    ``log Gamma(a, y) = (a - 1) log y - y + log(1 + (a-1)/y + (a-1)(a-2)/y^2 + ...)``
-    with ``a = dof/2``, ``y = x/2`` (relative error below 1e-6 there).
-    """
-    value = float(stats.chi2.logsf(x, dof))
-    return value if np.isfinite(value) else log_chi2_sf_asymptotic(x, dof)
-
-
-def log_chi2_sf_asymptotic(x: float, dof: int) -> float:
-    a, y = dof / 2.0, x / 2.0
-    series = 1.0 + (a - 1.0) / y + (a - 1.0) * (a - 2.0) / y**2
-    return (a - 1.0) * math.log(y) - y + math.log(series) - math.lgamma(a)
-
-
-@dataclass(frozen=True)
-class CandidateTest:
-    """Identification statistics of one candidate against the current model.
-
-    Attributes
-    ----------
-    name : candidate name.
-    status : ``"testable"``, ``"absorbed"`` (all parameters absorbed), ``"undetectable"``
-        (below the MDB anywhere within its physical bounds), ``"no_effect"`` (its columns are
-        zero with these data), ``"unavailable"`` (the data lack what it needs) or ``"in_model"``.
-    active : parameters tested (not absorbed).
-    retained : parameter -> fraction of its column's norm left after projection on the model.
-    absorbed_by : absorbed parameter -> model parameters that absorb it.
-    statistic, dof, p_value, log_p : likelihood-ratio statistic ``T`` and its chi2(dof) tail.
-    p_adjusted : Holm-adjusted p-value over the family (NaN outside the family).
-    estimate, stderr : linearised size of the active parameters and its 1-sigma.
-    mdb : active parameter -> minimal detectable bias (alone, others zero).
-    influence : model parameter -> largest shift of its estimate caused by one of the
-        candidate's parameters left out at its MDB (Baarda's external reliability: how much an
-        effect the test cannot see may bias the fitted model).
-    lambda0 : noncentrality at which the chain detects and identifies it with ``power``.
-    reason : text for statuses other than testable.
-    """
-
-    name: str
-    status: str
-    active: tuple[str, ...] = ()
-    retained: dict[str, float] = field(default_factory=dict)
-    absorbed_by: dict[str, list[str]] = field(default_factory=dict)
-    statistic: float = math.nan
-    dof: int = 0
-    p_value: float = math.nan
-    log_p: float = math.nan
-    p_adjusted: float = math.nan
-    estimate: dict[str, float] = field(default_factory=dict)
-    stderr: dict[str, float] = field(default_factory=dict)
-    mdb: dict[str, float] = field(default_factory=dict)
-    influence: dict[str, float] = field(default_factory=dict)
-    lambda0: float = math.nan
-    reason: str = ""
-    basis: FloatArray | None = field(default=None, repr=False, compare=False)
-    projected: FloatArray | None = field(default=None, repr=False, compare=False)
-
-
-def _orthonormal(M: FloatArray) -> FloatArray:
-    """Orthonormal basis of the column space of M (SVD, numerically rank-revealing)."""
-    if M.shape[1] == 0:
-        return np.zeros((M.shape[0], 0))
-    u, s, _ = np.linalg.svd(M, full_matrices=False)
-    keep = s > 1e-12 * max(s[0], 1e-300)
-    return u[:, keep]
-
-
-def _absorbed_by(column: FloatArray, A: FloatArray, names: Sequence[str]) -> list[str]:
-    """Model parameters that carry most of ``column`` (normalised least-squares weights)."""
-    norms = np.linalg.norm(A, axis=0)
-    w = np.linalg.lstsq(A / norms, column, rcond=None)[0]
-    big = np.abs(w) >= 0.3 * np.max(np.abs(w)) if np.any(w) else np.zeros(w.size, bool)
-    return [names[i] for i in np.flatnonzero(big)]
-
-
-def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
-                       power: float = POWER, absorbed: float = ABSORBED
-                       ) -> list[CandidateTest]:
-    """Identification statistics of every candidate against the model of ``fit``.
-
-    Linearised at the fitted values with each candidate's parameters at zero. See the module
-    docstring for the statistic, absorption, MDB and undetectability; the family for Holm's
-    procedure (and ``m`` in the MDB) is the candidates with at least one active parameter.
-    """
-    A = fit.jacobian
-    Q = _orthonormal(A)
-    r = fit.residual
-    values = fit.params
-    unavailable = {**problem.unavailable, **{
-        c: f"needs {need} in the model first" for c, need in problem.requires.items()
-        if need not in fit.effects and c not in problem.unavailable}}
-    pending = [c for c in problem.candidates
-               if c.name not in fit.effects and c.name not in unavailable]
-    all_params = [p for c in pending for p in c.parameters]
-    G_all = jacobian(problem, values, all_params) if all_params else np.zeros((r.size, 0))
-
-    tests: dict[str, CandidateTest] = {}
-    work: list[tuple[Effect, list[int], FloatArray, FloatArray, dict, dict]] = []
-    offset = 0
-    for c in problem.candidates:
-        if c.name in fit.effects:
-            tests[c.name] = CandidateTest(c.name, "in_model", reason="already in the model")
-            continue
-        if c.name in unavailable:
-            tests[c.name] = CandidateTest(c.name, "unavailable", reason=unavailable[c.name])
-            continue
-        G = G_all[:, offset:offset + len(c.parameters)]
-        offset += len(c.parameters)
-        Gbar = G - Q @ (Q.T @ G)
-        norms = np.linalg.norm(G, axis=0)
-        kept = np.linalg.norm(Gbar, axis=0) / np.where(norms > 0, norms, 1.0)
-        retained = {p: float(kept[j]) for j, p in enumerate(c.parameters)}
-        absorbed_by: dict[str, list[str]] = {}
-        active = [j for j in range(len(c.parameters)) if norms[j] > 0]
-        for j in active:
-            if kept[j] < absorbed:
-                absorbed_by[c.parameters[j]] = _absorbed_by(G[:, j], A, fit.names)
-        active = [j for j in active if kept[j] >= absorbed]
-        # a parameter may also be absorbed by the model together with the candidate's others
-        while len(active) > 1:
-            fractions = []
-            for j in active:
-                others = _orthonormal(Gbar[:, [i for i in active if i != j]])
-                rest = Gbar[:, j] - others @ (others.T @ Gbar[:, j])
-                fractions.append(np.linalg.norm(rest) / norms[j])
-            worst = int(np.argmin(fractions))
-            if fractions[worst] >= absorbed:
-                break
-            j = active.pop(worst)
-            absorbed_by[c.parameters[j]] = _absorbed_by(
-                G[:, j], np.column_stack([A, G[:, active]]),
-                [*fit.names, *(c.parameters[i] for i in active)])
-        if not np.any(norms > 0):
-            tests[c.name] = CandidateTest(c.name, "no_effect", retained=retained,
-                                          reason="its parameters do not change these data")
-        elif not active:
-            tests[c.name] = CandidateTest(c.name, "absorbed", retained=retained,
-                                          absorbed_by=absorbed_by,
-                                          reason="absorbed by " + ", ".join(sorted(
-                                              {n for v in absorbed_by.values() for n in v})))
-        else:
-            work.append((c, active, G, Gbar, retained, absorbed_by))
-
-    m = len(work)
-    lam_global = noncentrality(alpha, fit.dof, power) if fit.dof > 0 else math.inf
-    log_ps = []
-    for c, active, G, Gbar, retained, absorbed_by in work:
-        Ga = Gbar[:, active]
-        names = tuple(c.parameters[j] for j in active)
-        N = Ga.T @ Ga
-        cov = np.linalg.inv(N)
-        est = cov @ (Ga.T @ r)
-        T = float(est @ N @ est)
-        q = len(active)
-        lam0 = max(lam_global, noncentrality(alpha / m, q, power))
-        mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
-        shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
-        influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))
-        reach = sum(max(abs(c.bounds[j][0]), abs(c.bounds[j][1])) * math.sqrt(N[k, k])
-                    for k, j in enumerate(active)) ** 2
-        log_p = log_chi2_sf(T, q)
-        status, reason = "testable", ""
-        if reach < lam0:
-            status = "undetectable"
-            reason = (f"noncentrality at most {reach:.3g} within its physical bounds, "
-                      f"{lam0:.3g} needed")
-        tests[c.name] = CandidateTest(
-            c.name, status, names, retained, absorbed_by, T, q, float(np.exp(log_p)), log_p,
-            math.nan, dict(zip(names, est.tolist(), strict=True)),
-            dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
-            lam0, reason, _orthonormal(Ga), Ga)
-        log_ps.append(log_p)
-    if work:
-        adjusted = holm(np.exp(log_ps))
-        for (c, *_), p in zip(work, adjusted, strict=True):
-            t = tests[c.name]
-            tests[c.name] = CandidateTest(**{**t.__dict__, "p_adjusted": float(p)})
-    return [tests[c.name] for c in problem.candidates]
-
-
-def canonical_correlation(a: CandidateTest, b: CandidateTest) -> float:
-    """Largest canonical correlation of two candidates' projected column spaces.
-
-    For one-parameter candidates this is ``|corr(w_a, w_b)|`` of their w-test statistics under
-    the model; in general the cosine of the smallest principal angle between the spaces.
-    """
-    if a.basis is None or b.basis is None or not a.basis.size or not b.basis.size:
-        return 0.0
-    return float(min(1.0, np.linalg.svd(a.basis.T @ b.basis, compute_uv=False)[0]))
-
-
-def separated(winner: CandidateTest, partner: CandidateTest, residual: FloatArray,
-              alpha: float = ALPHA, absorbed: float = ABSORBED) -> bool:
-    """Do the data reject the partner as the explanation of the winner's signal?
-
-    Fit the partner instead (linearised): the residual ``r_j`` and the winner's columns
-    projected orthogonal to the model and the partner. If the partner absorbs the winner's
-    columns it explains all the winner can: not separated. Otherwise the statistic of the
-    winner's columns in ``r_j`` is chi2(q) if the partner is the true effect; significant at
-    ``alpha`` means the data separate them.
-    """
-    return not _explains(partner.basis, winner, residual, alpha, absorbed)
-
-
-def _explains(U: FloatArray, winner: CandidateTest, residual: FloatArray, alpha: float,
-              absorbed: float) -> bool:
-    """Do the columns of the orthonormal ``U``, fitted (linearised), leave no significant
-    signal at ``alpha`` in the winner's columns projected orthogonal to them?"""
-    rj = residual - U @ (U.T @ residual)
-    W = winner.projected - U @ (U.T @ winner.projected)
-    if np.linalg.norm(W) < absorbed * np.linalg.norm(winner.projected):
-        return True
-    basis = _orthonormal(W)
-    T = float(np.sum((basis.T @ rj) ** 2))
-    return bool(stats.chi2.sf(T, basis.shape[1]) >= alpha)
-
-
-def effect_for_observation(observation: CandidateTest, effects: Sequence[CandidateTest],
-                           residual: FloatArray, level: float, alpha: float = ALPHA,
-                           absorbed: float = ABSORBED) -> CandidateTest | None:
-    """The effect to adapt before a flagged observation, if one explains its signal.
-
-    An effect of ``effects`` (Holm-significant) explains the observation's signal when,
-    fitted instead (linearised), it leaves the observation's shift insignificant at ``level``
-    (its family's share of ``alpha``, :func:`separated`). Several effects present together
-    can concentrate their signal on the observations of largest leverage (an INS scale
-    factor and a pitch bias at the outermost mirrors), so a pair of effects also explains it
-    when, fitted together, they leave the shift insignificant at ``level`` while their own
-    columns, given the shift, stay significant at ``alpha`` (the observation alone does not
-    explain them). The strongest effect (smallest p-value) that explains the signal, alone
-    or in such a pair, is returned; None if none does.
-    """
-    ranked = sorted(effects, key=lambda t: (t.log_p, t.dof))
-    for t in ranked:
-        if not separated(observation, t, residual, level, absorbed):
-            return t
-    for t in ranked:
-        for other in ranked:
-            if other.name == t.name:
-                continue
-            pair = np.column_stack([t.projected, other.projected])
-            if _explains(_orthonormal(pair), observation, residual, level, absorbed) \
-                    and not _explains(observation.basis, _columns(pair), residual, alpha,
-                                      absorbed):
-                return t
-    return None
-
-
-def _columns(projected: FloatArray) -> CandidateTest:
-    """A nameless candidate of the given projected columns (for :func:`_explains`)."""
-    return CandidateTest("", "testable", basis=_orthonormal(projected), projected=projected)
-
-
-def contained(inner: CandidateTest, outer: CandidateTest, level: float = CONFOUNDED) -> bool:
-    """Does ``inner``'s projected column space lie (nearly) inside ``outer``'s: every
-    canonical correlation of the two spaces above ``level`` (``inner`` has fewer columns)?"""
-    if inner.basis is None or outer.basis is None or not inner.basis.size \
-            or inner.basis.shape[1] > outer.basis.shape[1]:
-        return False
-    return bool(np.linalg.svd(inner.basis.T @ outer.basis, compute_uv=False).min() > level)
-
-
-def minimal_member(winner: CandidateTest, eligible: Sequence[CandidateTest],
-                   others: Sequence[CandidateTest], residual: FloatArray,
-                   alpha: float = ALPHA, absorbed: float = ABSORBED,
-                   confounded: float = CONFOUNDED) -> CandidateTest | None:
-    """The minimal parametrisation of the winner's signal, if smaller than the winner.
-
-    A candidate of ``eligible`` (Holm-significant) whose columns lie nearly inside the
-    winner's (:func:`contained`) stands in for it when, fitted alone or together with one
-    candidate of ``others`` (fewer parameters in total than the winner), it leaves no
-    significant signal in the winner's columns (linearised, at ``alpha``): the winner's
-    further parameters are then not needed, or explain what another effect does (a lever arm
-    standing in for a range bias and a focal scale). Fewest parameters first, then the
-    smallest p-value; None if no candidate qualifies.
-    """
-    best: tuple[tuple[int, float], CandidateTest] | None = None
-    for inner in eligible:
-        if inner.name == winner.name or inner.dof >= winner.dof \
-                or not contained(inner, winner, confounded):
-            continue
-        for extra in (None, *others):
-            if extra is not None and (extra.name in (winner.name, inner.name)
-                                      or inner.dof + extra.dof >= winner.dof):
-                continue
-            columns = [inner.projected] + ([] if extra is None else [extra.projected])
-            if _explains(_orthonormal(np.column_stack(columns)), winner, residual, alpha,
-                         absorbed):
-                key = (inner.dof + (0 if extra is None else extra.dof), inner.log_p)
-                if best is None or key < best[0]:
-                    best = (key, inner)
-                break
-    return None if best is None else best[1]
-
 
 # --------------------------------------------------------------------------- the DIA loop
 
@@ -727,17 +399,6 @@ def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
         fit = alt
 
 
-def wald_test(fit: LeastSquaresFit, parameters: Sequence[str]) -> tuple[float, int, float]:
-    """Wald statistic ``b' C^-1 b`` of fitted ``parameters`` (those in the fit) against zero,
-    its degrees of freedom and its chi-square p-value."""
-    idx = [fit.names.index(p) for p in parameters if p in fit.names]
-    if not idx:
-        return 0.0, 0, 1.0
-    b = fit.values[idx]
-    T = float(b @ np.linalg.solve(fit.covariance[np.ix_(idx, idx)], b))
-    return T, len(idx), float(stats.chi2.sf(T, len(idx)))
-
-
 def _reconsider(problem: Problem, fit: LeastSquaresFit, named: Sequence[str], fixed: set[str],
                 alpha: float) -> tuple[LeastSquaresFit, dict[str, float]]:
     """Drop, one at a time, the least significant of the named effects and flagged
@@ -784,7 +445,3 @@ def _fit_with_fixed(problem: Problem, effects: Sequence[str], start: Mapping[str
                              problem.start, problem.unavailable), effects, start)
 
 
-def chi2_red_band(dof: int, level: float = 0.99) -> tuple[float, float]:
-    """Central ``level`` band of chi2(dof)/dof, the reduced chi-square of a right model."""
-    lo, hi = stats.chi2.ppf([(1 - level) / 2, (1 + level) / 2], dof)
-    return float(lo / dof), float(hi / dof)

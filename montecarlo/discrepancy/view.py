@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from montecarlo.discrepancy.engine import CandidateTest, Diagnosis, chi2_red_band
+from montecarlo.discrepancy.candidate_tests import CandidateTest, chi2_red_band
+from montecarlo.discrepancy.engine import Diagnosis
 from montecarlo.discrepancy.problem import OUTLIER, is_outlier
 from montecarlo.lsq import LeastSquaresFit
 

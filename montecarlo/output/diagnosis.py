@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from montecarlo.discrepancy.engine import Diagnosis, chi2_red_band
+from montecarlo.discrepancy.candidate_tests import chi2_red_band
+from montecarlo.discrepancy.engine import Diagnosis
 from montecarlo.discrepancy.problem import OUTLIER
 from montecarlo.discrepancy.view import SystemView, format_text, residual_rms
 from montecarlo.io.files import atomic_write_bytes, save_figure

@@ -20,8 +20,9 @@ from numpy.typing import NDArray
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
 from montecarlo.discrepancy import procedure_effects as pe
+from montecarlo.discrepancy.candidate_tests import ALPHA
 from montecarlo.discrepancy.design import TRIAL_METRICS, inject_at_mdb, score_trials
-from montecarlo.discrepancy.engine import ALPHA, Diagnosis
+from montecarlo.discrepancy.engine import Diagnosis
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.engine.system import Metric

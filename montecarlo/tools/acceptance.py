@@ -28,8 +28,8 @@ from scipy import stats
 
 from montecarlo.discrepancy import collimation_effects as ce
 from montecarlo.discrepancy import ground_effects as ge
+from montecarlo.discrepancy.candidate_tests import ALPHA, analyse_candidates
 from montecarlo.discrepancy.design import design_mdb, inject_at_mdb
-from montecarlo.discrepancy.engine import ALPHA, analyse_candidates
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.geometry.camera import Camera

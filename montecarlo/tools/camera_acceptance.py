@@ -33,8 +33,9 @@ from montecarlo.camera_calibration.simulate import (
     target_grid,
 )
 from montecarlo.discrepancy import camera_effects as ce
+from montecarlo.discrepancy.candidate_tests import ALPHA, analyse_candidates
 from montecarlo.discrepancy.design import design_mdb
-from montecarlo.discrepancy.engine import ALPHA, analyse_candidates, diagnose
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.discrepancy.problem import OUTLIER, with_outliers
 from montecarlo.io.camera_csv import CameraData
