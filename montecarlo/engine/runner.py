@@ -279,11 +279,17 @@ def estimated_seconds(study: Study, points: list[int], reference: bool) -> float
 
 
 def uses_reference(study: Study, options: RunOptions) -> bool:
-    """Whether the trials go through the literal reference path: asked for, per-trial values
-    kept, no fast kernel, or a study so small that loading the kernel would cost more. Decided
-    on the whole study, so that resuming never changes it."""
-    if options.reference or study.header.per_trial \
-            or not hasattr(study.system, "accumulate_block"):
+    """Whether the trials go through the literal reference path: asked for, or, for a system
+    with a fused kernel, per-trial values kept or a study so small that loading the kernel
+    would cost more; a system with a faster path beside its literal one
+    (``has_reference_path``) takes the faster one unless asked; one with neither has only its
+    literal path. Decided on the whole study, so that resuming never
+    changes it."""
+    if options.reference:
+        return True
+    if not hasattr(study.system, "accumulate_block"):
+        return not getattr(study.system, "has_reference_path", False)
+    if study.header.per_trial:
         return True
     return estimated_seconds(study, list(range(len(study.points))), True) < REFERENCE_BELOW
 

@@ -57,9 +57,10 @@ class System(Protocol):
     def is_sampled(self, prepared: Any) -> bool:
         """True if trials sample random errors; False if they enumerate every case."""
 
-    def simulate_block(self, prepared: Any, streams: Streams, first_trial: int, n: int
-                       ) -> tuple[BlockValues, BlockInvalid]:
-        """Simulate trials ``first_trial .. first_trial + n - 1`` from the given streams."""
+    def simulate_block(self, prepared: Any, streams: Streams, first_trial: int, n: int,
+                       reference: bool = False) -> tuple[BlockValues, BlockInvalid]:
+        """Simulate trials ``first_trial .. first_trial + n - 1`` from the given streams
+        (``reference``: by the literal path, where the system also has a batched one)."""
 
     def describe(self, prepared: Any) -> list[str]:
         """Lines stating the assumptions of this config, for reports."""

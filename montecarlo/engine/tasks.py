@@ -36,7 +36,8 @@ def run_task(task: PointTask, blocks: range, keep_trials: bool, reference: bool 
     """Simulate consecutive blocks of one grid point; a pure function of its arguments.
 
     Uses the system's fused ``accumulate_block`` when it has one, unless per-trial values are
-    kept or the reference implementation is asked for.
+    kept or the reference implementation is asked for (``reference``, also passed to
+    ``simulate_block``: a system with a batched path then takes its literal one).
     """
     stats = PointStats()
     kept = {}
@@ -48,7 +49,8 @@ def run_task(task: PointTask, blocks: range, keep_trials: bool, reference: bool 
         if fast is not None:
             fast(task.prepared, streams, first, n, b, stats)
             continue
-        values, invalid = task.system.simulate_block(task.prepared, streams, first, n)
+        values, invalid = task.system.simulate_block(task.prepared, streams, first, n,
+                                                     reference=reference)
         stats.add_block(b, values, invalid, n)
         if keep_trials:
             kept[b] = values

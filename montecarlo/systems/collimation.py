@@ -292,5 +292,6 @@ COLLIMATION = ParamSystem(
             "mount_roll_sigma": (0.0, 45.0), "use_roll": (0, 1), "fit_frame_tilt": (0, 1),
             "procedure": (0, 1), "reference_rows": (0, 1), "roll_mirror_left": (0, 1),
             "free_roll": (0, 1), "roll_prior_sigma": (0.01, 45.0)},
+    has_reference_path=True,
 )
 """Seed 003: autocollimator-INS axis calibration, as a study system."""

@@ -299,8 +299,9 @@ class GroundSystem:
         return true, affine[0][:, None] * np.stack(rows) + affine[1][:, None]
 
     def simulate_block(self, prepared: PreparedGround, streams: Streams, first_trial: int,
-                       n: int) -> tuple[BlockValues, BlockInvalid]:
-        """Per-trial metrics through the literal reference (:mod:`montecarlo.seed000.ground`)."""
+                       n: int, reference: bool = False) -> tuple[BlockValues, BlockInvalid]:
+        """Per-trial metrics through the literal reference (:mod:`montecarlo.seed000.ground`),
+        whatever ``reference`` says (the fast path is :meth:`accumulate_block`)."""
         p = prepared
         true, e = self.draws(p, streams, first_trial, n)
         solutions = ground.simulate(

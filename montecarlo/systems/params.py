@@ -57,10 +57,13 @@ class ParamSystem:
     choices : parameter -> the texts a text parameter may take.
     presets : grade -> parameters it sets [SI units], chosen by ``[imu] grade = "..."``
         (:mod:`montecarlo.systems.imu_grades`); a parameter given in ``[params]`` wins.
+    has_reference_path : ``run_trials`` takes ``reference=True`` for its literal path (trial
+        by trial, without compiled kernels; ``run --reference``) and otherwise takes a faster
+        one tested equal to it; without it, ``run_trials`` has one path, the literal one.
     """
 
     name: str
-    run_trials: Callable[[Mapping[str, Any], np.random.Generator, int], Mapping[str, Any]]
+    run_trials: Callable[..., Mapping[str, Any]]
     defaults: Mapping[str, Any]
     units: Mapping[str, str]
     metrics_: tuple[Metric, ...]
@@ -69,6 +72,7 @@ class ParamSystem:
     limits: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     presets: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    has_reference_path: bool = False
 
     def key(self, param: str) -> str:
         """The study-file key of a parameter: its name and unit suffix."""
@@ -126,8 +130,9 @@ class ParamSystem:
         return requested
 
     def simulate_block(self, prepared: PreparedParams, streams: Streams, first_trial: int,
-                       n: int) -> tuple[BlockValues, BlockInvalid]:
-        out = self.run_trials(prepared.params, streams.generator("trials"), n)
+                       n: int, reference: bool = False) -> tuple[BlockValues, BlockInvalid]:
+        literal = {"reference": True} if reference and self.has_reference_path else {}
+        out = self.run_trials(prepared.params, streams.generator("trials"), n, **literal)
         values = {(VARIANT, m.name): np.asarray(out[m.name], float) for m in self.metrics_}
         failed = int(np.count_nonzero(~np.isfinite(values[(VARIANT, self.metrics_[0].name)])))
         return values, {VARIANT: {"total": failed, **({"FAILED": failed} if failed else {})}}

@@ -217,5 +217,6 @@ STABILIZATION = ParamSystem(
             "max_passes": (1.0, 100.0), "target_offset": (0.0, 1e4)},
     choices={"mount": MOUNTS, "gyro_sampling": sim.GYRO_SAMPLINGS},
     presets=PRESETS["stabilization"],
+    has_reference_path=True,
 )
 """Seed 001: gyro indirect stabilisation installation angles, as a study system."""
