@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from montecarlo.camera_calibration.calibrate import (
@@ -88,6 +89,12 @@ def test_least_squares_recovers_distortion_and_its_sigma_is_honest():
     z = {k: (noisy.params[k] - v) / noisy.stderr[k] for k, v in truth.items()}
     assert max(abs(v) for v in z.values()) < 4.5, z
     assert noisy.rms == pytest.approx(0.1, rel=0.1)  # 640 coordinates: rel. sd 2.8 %
+    # 640 coordinates - 39 parameters (5 intrinsics, 4 distortion, 6 per view) = 601 dof, and
+    # chi2_red of the stated noise within its central 99.9 % band (sd sqrt(2/601) = 5.8 %)
+    assert noisy.dof == 601
+    assert noisy.chi2 == pytest.approx(np.sum(noisy.residual**2) / 0.01, rel=1e-12)
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], 601) / 601
+    assert lo < noisy.chi2_red < hi
 
 
 def test_two_views_are_refused():

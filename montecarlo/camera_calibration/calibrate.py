@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
 from montecarlo.camera_calibration.model import DISTORTION, project
+from montecarlo.lsq import ParameterSummary
 
 FloatArray = NDArray[np.float64]
 
@@ -139,7 +140,7 @@ def closed_form(points: ArrayLike, image: ArrayLike, view: ArrayLike, n_views: i
 
 
 @dataclass(frozen=True)
-class Calibration:
+class Calibration(ParameterSummary):
     """A fitted camera.
 
     Attributes
@@ -158,12 +159,9 @@ class Calibration:
     sigma: float
 
     @property
-    def params(self) -> dict[str, float]:
-        return dict(zip(self.names, self.values.tolist(), strict=True))
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        return dict(zip(self.names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
+    def chi2(self) -> float:
+        """Sum of squared residuals over the noise behind the covariance [1]."""
+        return float(np.sum(self.residual**2)) / self.sigma**2
 
     @property
     def rms(self) -> float:
