@@ -54,6 +54,28 @@ def test_value_is_within_the_bin_bounds_of_the_sample_superquantile():
         assert lo < exact < hi
 
 
+def test_tail_averages_over_many_occupied_bins_by_exact_sums():
+    """More than 10,000 occupied bins (a 10^6-trial histogram has them): the estimate and its
+    bounds equal the tail-weighted averages of bin centres and edges summed exactly
+    (``math.fsum``), to a few ulp; the weights by hand are ``tail_weights``' test above."""
+    from montecarlo.engine.aggregate import ABS_LOWER, ABS_UPPER, abs_histogram
+    from montecarlo.engine.superquantile import superquantile
+
+    m = _stats(np.random.default_rng(8).lognormal(-7.0, 3.0, 200_000))
+    counts = abs_histogram(m.hist)
+    nz = np.flatnonzero(counts)
+    assert nz.size > 10_000
+    lo_val, hi_val = m.value_range(True)
+    lower = np.clip(ABS_LOWER[nz], lo_val, hi_val)
+    upper = np.clip(ABS_UPPER[nz], lo_val, hi_val)
+    tail = counts.sum() * 0.05
+    w = tail_weights(counts[nz].astype(float), tail)
+    exact = [math.fsum(w * e) / tail for e in (0.5 * (lower + upper), lower, upper)]
+    est, lo, hi = superquantile(counts, ABS_LOWER, ABS_UPPER, lo_val, hi_val, 0.95, 0.95)
+    assert est == pytest.approx(exact[0], rel=1e-14)
+    assert lo < exact[1] and hi > exact[2]  # the bounds widened by the interval
+
+
 def test_magnitude_of_signed_values():
     """cvar of |x| for N(0, 1) values: |x| is half-normal, CVaR_0.95 = phi(z_0.975) / 0.05 * 2
     = 2.3378; from 40,000 values the estimate is within 3 of its standard errors."""
