@@ -27,9 +27,9 @@ def accumulate(values, rows, hist, stats, bins, piece):  # pragma: no cover - co
     values : (k, n) float64, of which ``rows`` (m,) are the metrics, in this order;
     hist : (m, N_BINS) int64, in place; stats : (m, 5) float64 in
     place: count, mean, m2, min, max; piece : int, the values are reduced ``piece`` columns
-    at a time, each piece's moments merged into ``stats`` by Chan's formula, piece after piece
-    and row after row (so the result depends on ``piece``, never on how many columns one call
-    is given); bins : (piece,) int32 scratch for the bin indices (as
+    at a time, each piece's moments merged into ``stats`` by Chan's formula, row after row and
+    piece after piece within a row (so the result depends on ``piece``, never on how many
+    columns one call is given); bins : (piece,) int32 scratch for the bin indices (as
     :func:`.aggregate.bin_index`).
 
     Written for the loop vectoriser: validity is tested on the exponent bits and min/max are
