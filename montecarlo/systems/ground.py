@@ -180,12 +180,15 @@ def _scratch(m: int) -> tuple[np.ndarray, ...]:
     return np.empty((2, m), np.uint16), fields, bins, gk.output_rows(fields)
 
 
-@functools.lru_cache(maxsize=16)
 def _fixed_mounting(psi: float, theta: float, gamma: float) -> np.ndarray:
-    """C_b^a (9,) row-major of fixed mounting angles [rad], computed once for all blocks."""
-    C = mounting_matrix(psi, theta, gamma).reshape(9)
-    C.flags.writeable = False
-    return C
+    """C_b^a (9,) row-major of fixed mounting angles [rad], computed once for all blocks (a
+    writeable copy: a read-only array would be another numba signature to compile)."""
+    return _mounting_once(psi, theta, gamma).copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _mounting_once(psi: float, theta: float, gamma: float) -> np.ndarray:
+    return mounting_matrix(psi, theta, gamma).reshape(9)
 
 
 class GroundSystem:
