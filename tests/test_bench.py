@@ -44,6 +44,9 @@ def test_bench_quick_json_has_every_figure():
     for s in stages:
         assert s["ns_per_trial"] > 0 and s["ceiling_ns_per_trial"] > 0
         assert s["fraction"] == pytest.approx(s["ceiling_ns_per_trial"] / s["ns_per_trial"])
+        # the binding ceiling is the larger of the stage's ceilings
+        assert s["bound_ns_per_trial"] >= s["ceiling_ns_per_trial"]
+        assert s["bound_fraction"] == pytest.approx(s["bound_ns_per_trial"] / s["ns_per_trial"])
     assert r["roofline"]["total_ns_per_trial"] == pytest.approx(
         sum(s["ns_per_trial"] for s in stages), rel=0.2)  # medians of each, not of the sum
     assert "roofline of the fused ground path" in subprocess.run(

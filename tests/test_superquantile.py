@@ -29,6 +29,7 @@ def test_names():
     assert cvar_level("p95") is None and cvar_level("cvar0") is None
     assert cvar_level("cvar100") is None
     assert is_cvar_column("cvar99_lo") and not is_cvar_column("p95_lo")
+    assert is_cvar_column("cvar95_hi") and is_cvar_column("cvar95")
 
 
 def test_tail_weights_by_hand():
@@ -52,6 +53,65 @@ def test_value_is_within_the_bin_bounds_of_the_sample_superquantile():
         est, lo, hi = _stats(x).superquantile(0.95, False, 0.95)
         assert est == pytest.approx(exact, rel=2.0**-10)
         assert lo < exact < hi
+
+
+def test_estimate_bounds_and_interval_by_hand():
+    """Four bins [0, 1), [1, 2), [2, 3), [3, 4) holding 7, 1, 1, 1 values, the smallest 0.2
+    and the largest 3.6 (the outer bins clipped to them): centres 0.6, 1.5, 2.5, 3.3. At
+    a = 0.8 the tail is the 2 largest values, one in each of the top bins: estimate
+    (2.5 + 3.3) / 2 = 2.9, edge bounds (2 + 3) / 2 = 2.5 and (3 + 3.6) / 2 = 3.3.
+    VaR is the ceil(0.8 * 10) = 8th smallest, in bin [1, 2) (the 7th is in the first):
+    centre 1.5. y = (mid - 1.5)_+ = 0, 0, 1, 1.8 with counts 7, 1, 1, 1: mean 0.28,
+    variance (8 * 0.28^2 + 0.72^2 + 1.52^2) / 9 = 3.456 / 9 = 0.384; se = sqrt(0.384 / 10)
+    / 0.2 = 0.97980; z = 1.95996 at 95 %."""
+    from montecarlo.engine.superquantile import superquantile
+
+    lower, upper = np.array([0.0, 1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0, 4.0])
+    counts = np.array([7, 1, 1, 1])
+    est, lo, hi = superquantile(counts, lower, upper, 0.2, 3.6, 0.8, 0.95)
+    half = 1.959963984540054 * math.sqrt(0.384 / 10) / 0.2
+    assert est == pytest.approx(2.9, rel=1e-15)
+    assert lo == pytest.approx(2.5 - half, rel=1e-14)
+    assert hi == pytest.approx(3.3 + half, rel=1e-14)
+    # a = 0.05 with counts 1, 7, 1, 1: the tail is 9.5 values, half of the one in the clipped
+    # bottom bin [0.2, 1) (centre 0.6): (0.5 * 0.6 + 7 * 1.5 + 2.5 + 3.3) / 9.5; VaR the
+    # 1st smallest, centre 0.6
+    est, lo, hi = superquantile(np.array([1, 7, 1, 1]), lower, upper, 0.2, 3.6, 0.05, 0.95)
+    assert est == pytest.approx((0.3 + 10.5 + 5.8) / 9.5, rel=1e-15)
+    y = np.array([0.0, 0.9, 1.9, 2.7])
+    c = np.array([1, 7, 1, 1])
+    var_y = float(np.sum(c * (y - np.sum(c * y) / 10) ** 2) / 9)
+    half = 1.959963984540054 * math.sqrt(var_y / 10) / 0.95
+    assert lo == pytest.approx((0.5 * 0.2 + 7 + 5) / 9.5 - half, rel=1e-14)
+    assert hi == pytest.approx((0.5 * 1.0 + 14 + 6.6) / 9.5 + half, rel=1e-14)
+    # one value: itself, no interval; two: an interval
+    assert superquantile(np.array([0, 1, 0, 0]), lower, upper, 1.3, 1.3, 0.8, 0.95)[0] == 1.3
+    assert np.isnan(superquantile(np.array([0, 1, 0, 0]), lower, upper, 1.3, 1.3, 0.8,
+                                  0.95)[1])
+    assert np.isfinite(superquantile(np.array([1, 0, 0, 1]), lower, upper, 0.2, 3.6, 0.5,
+                                     0.95)).all()
+
+
+def test_tail_averages_over_many_occupied_bins_by_exact_sums():
+    """More than 10,000 occupied bins (a 10^6-trial histogram has them): the estimate and its
+    bounds equal the tail-weighted averages of bin centres and edges summed exactly
+    (``math.fsum``), to a few ulp; the weights by hand are ``tail_weights``' test above."""
+    from montecarlo.engine.aggregate import ABS_LOWER, ABS_UPPER, abs_histogram
+    from montecarlo.engine.superquantile import superquantile
+
+    m = _stats(np.random.default_rng(8).lognormal(-7.0, 3.0, 200_000))
+    counts = abs_histogram(m.hist)
+    nz = np.flatnonzero(counts)
+    assert nz.size > 10_000
+    lo_val, hi_val = m.value_range(True)
+    lower = np.clip(ABS_LOWER[nz], lo_val, hi_val)
+    upper = np.clip(ABS_UPPER[nz], lo_val, hi_val)
+    tail = counts.sum() * 0.05
+    w = tail_weights(counts[nz].astype(float), tail)
+    exact = [math.fsum(w * e) / tail for e in (0.5 * (lower + upper), lower, upper)]
+    est, lo, hi = superquantile(counts, ABS_LOWER, ABS_UPPER, lo_val, hi_val, 0.95, 0.95)
+    assert est == pytest.approx(exact[0], rel=1e-14)
+    assert lo < exact[1] and hi > exact[2]  # the bounds widened by the interval
 
 
 def test_magnitude_of_signed_values():

@@ -180,6 +180,17 @@ def _scratch(m: int) -> tuple[np.ndarray, ...]:
     return np.empty((2, m), np.uint16), fields, bins, gk.output_rows(fields)
 
 
+def _fixed_mounting(psi: float, theta: float, gamma: float) -> np.ndarray:
+    """C_b^a (9,) row-major of fixed mounting angles [rad], computed once for all blocks (a
+    writeable copy: a read-only array would be another numba signature to compile)."""
+    return _mounting_once(psi, theta, gamma).copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _mounting_once(psi: float, theta: float, gamma: float) -> np.ndarray:
+    return mounting_matrix(psi, theta, gamma).reshape(9)
+
+
 class GroundSystem:
     """Seed 000 ground calibration as a :class:`montecarlo.systems.System`."""
 
@@ -252,7 +263,14 @@ class GroundSystem:
         signs = corner_signs(first_trial, n, len(p.corners))
         free = iter(np.empty((9, n)) if buffers is None else buffers)
         zeros = next(free)
-        zeros[...] = 0.0
+        zeroed = False
+
+        def zero_row() -> np.ndarray:  # filled only if a source is fixed
+            nonlocal zeroed
+            if not zeroed:
+                zeros[...] = 0.0
+                zeroed = True
+            return zeros
 
         def unit(name: str, dist: Distribution) -> tuple[np.ndarray, float, float]:
             if dist.is_corner:
@@ -260,7 +278,7 @@ class GroundSystem:
             if dist.is_random:
                 u = next(free)
                 return (u, *streams.fill_unit(dist, name, u))
-            return zeros, 0.0, dist.location
+            return zero_row(), 0.0, dist.location
 
         true: list[np.ndarray | float] = []
         for name, dist in zip(MOUNTING_SOURCES, p.mounting, strict=True):
@@ -286,7 +304,7 @@ class GroundSystem:
             fill_pair(px, p.relation, streams, "pixel_z", vals[1], vals[3])
             cols += [(v, 1.0, 0.0) for v in vals]
         else:
-            cols += [(zeros, 0.0, px.location)] * 4
+            cols += [(zero_row(), 0.0, px.location)] * 4
         rows = [c[0] for c in cols]
         affine = np.array([[c[1] for c in cols], [c[2] for c in cols]])
         return tuple(true), rows, affine
@@ -345,7 +363,7 @@ class GroundSystem:
             true, rows, affine = self.unit_draws(p, streams, first_trial + s, m,
                                                  _draw_buffers(m))
             fixed = all(isinstance(a, float) for a in true)
-            C = mounting_matrix(*true).reshape(9) if fixed else \
+            C = _fixed_mounting(*true) if fixed else \
                 np.ascontiguousarray(mounting_matrix(*true).reshape(m, 9).T)
             t1 = tick() if tick else 0.0
             gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0,

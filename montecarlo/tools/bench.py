@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import psutil
 
-from montecarlo.engine.aggregate import PointStats
+from montecarlo.engine.aggregate import N_BINS, PointStats, bin_index
 from montecarlo.engine.distributions import Streams
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.seed000 import ground
@@ -69,6 +69,41 @@ def _median_rate(fn, trials: int, repeats: int) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return trials / statistics.median(times)
+
+
+@functools.cache
+def _ceiling_kernels():
+    """Compiled loops for two ceilings of the roofline (numba: imported only here).
+
+    ``roots_and_divisions(x, out)``: the 12 square roots and 10 divisions of one trial of the
+    solve (``ground_kernel._trial``), on independent data, summed: the throughput of the
+    operations that set the solve's pace. ``increments(bins, hist)``: the histogram increments
+    of the accumulation alone, ``hist[r, bins[r, i]] += 1`` row after row, as it does them.
+    """
+    import numba as nb
+
+    @nb.njit(nogil=True, error_model="numpy", parallel=True)
+    def roots_and_divisions(x, out):  # pragma: no cover - compiled
+        for i in nb.prange(x.shape[0]):
+            a = x[i]
+            s = (np.sqrt(a + 1.0) + np.sqrt(a + 2.0) + np.sqrt(a + 3.0) + np.sqrt(a + 4.0)
+                 + np.sqrt(a + 5.0) + np.sqrt(a + 6.0) + np.sqrt(a + 7.0) + np.sqrt(a + 8.0)
+                 + np.sqrt(a + 9.0) + np.sqrt(a + 10.0) + np.sqrt(a + 11.0)
+                 + np.sqrt(a + 12.0))
+            s += (1.0 / (a + 1.5) + 1.0 / (a + 2.5) + 1.0 / (a + 3.5) + 1.0 / (a + 4.5)
+                  + 1.0 / (a + 5.5) + 1.0 / (a + 6.5) + 1.0 / (a + 7.5) + 1.0 / (a + 8.5)
+                  + 1.0 / (a + 9.5) + 1.0 / (a + 10.5))
+            out[i] = s
+
+    @nb.njit(nogil=True)
+    def increments(bins, hist):  # pragma: no cover - compiled
+        for r in range(bins.shape[0]):
+            h = hist[r]
+            b = bins[r]
+            for i in range(b.shape[0]):
+                h[b[i]] += 1
+
+    return roots_and_divisions, increments
 
 
 def naive_rate(n: int, repeats: int) -> float:
@@ -118,6 +153,13 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
     are CPU times of this thread (so that other processes' load does not enter; the kernels
     run in this thread), medians of ``repeats`` runs [ns per trial]; ``fraction`` is
     ceiling / stage.
+
+    A memory copy is not what bounds the solve or the accumulation, so each also gets the
+    ceiling of the work that does (``bound``): the solve's 12 square roots and 10 divisions
+    per trial alone, and the accumulation's histogram increments alone (the bins of the same
+    metric values, into histogram rows of the same size, in the same order). ``bound`` is
+    the larger of a stage's ceilings (the one that binds; the ceiling itself for the draws
+    and the metrics), ``bound_fraction`` = bound / stage.
     """
     from montecarlo.seed000 import ground_kernel as gk
     from montecarlo.systems.ground import STAGES, _scratch
@@ -144,6 +186,12 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
     gk.solve_chunk(C, p.L, p.H, float(cam.k_x), float(cam.k_z), cam.n_x / 2.0, cam.n_z / 2.0,
                    rows, affine, flags, fields, out_rows)
     args = [fields[a:b].copy() for a, b in ((0, 6), (6, 12), (12, 14), (14, 16))]
+    gk.metrics_in_place(fields)
+    values = fields[gk.METRIC_ROWS]
+    bins = np.where(np.isfinite(values), bin_index(np.nan_to_num(values)), 0).astype(np.int32)
+    hist = np.zeros((len(gk.METRIC_ROWS), N_BINS), np.int64)
+    roots_and_divisions, increments = _ceiling_kernels()
+    x, y = np.linspace(0.0, 1.0, m), np.empty(m)
     work = [a.copy() for a in args]
     gen = np.random.Generator(np.random.PCG64(1))
     draw_buf = np.empty((n_random, m))
@@ -175,14 +223,24 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
         for _ in range(chunks):
             np.copyto(dst, src)
 
+    def compute() -> None:
+        for _ in range(chunks):
+            roots_and_divisions(x, y)
+
+    def scatter() -> None:
+        for _ in range(chunks):
+            increments(bins, hist)
+
     def timed(fn) -> float:
         t0 = time.thread_time()
         fn()
         return time.thread_time() - t0
 
     stages()  # warm-up: compilation, caches
+    compute()
+    scatter()
     spent: dict[str, list[float]] = {k: [] for k in (*STAGES, "total")}
-    ceiling: dict[str, list[float]] = {k: [] for k in STAGES}
+    ceiling: dict[str, list[float]] = {k: [] for k in (*STAGES, "compute", "increments")}
     for _ in range(repeats):  # stages and ceilings alternate
         clock = stages()
         for k in STAGES:
@@ -192,18 +250,30 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
         ceiling["metrics"].append(max(timed(ufuncs) - timed(refresh), 0.0))
         ceiling["solve"].append(timed(functools.partial(memcpy, "solve")))
         ceiling["accumulation"].append(timed(functools.partial(memcpy, "accumulation")))
+        ceiling["compute"].append(timed(compute))
+        ceiling["increments"].append(timed(scatter))
     scale = 1e9 / n
     what = {"draws": f"the generator alone, {n_random} U[0, 1) per trial",
             "solve": f"memory copy of {solve_bytes} B per trial (draws in, fields out)",
             "metrics": "the same ufuncs alone (arctan2 x6, arccos x2, arcsin x2)",
             "accumulation": f"memory copy of {acc_bytes} B per trial (metrics in, bins out)"}
+    second = {"solve": ("compute", "its 12 square roots and 10 divisions alone"),
+              "accumulation": ("increments", f"its {len(gk.METRIC_ROWS)} histogram "
+                                             "increments alone")}
     out: dict[str, Any] = {"trials": n, "sub_chunk": m, "stages": []}
     for k in STAGES:
         stage = statistics.median(spent[k]) * scale
         ceil = statistics.median(ceiling[k]) * scale
+        bound, bound_what = ceil, what[k]
+        if k in second:
+            other = statistics.median(ceiling[second[k][0]]) * scale
+            if other > ceil:
+                bound, bound_what = other, second[k][1]
         out["stages"].append({"stage": k, "ns_per_trial": stage, "ceiling": what[k],
                               "ceiling_ns_per_trial": ceil,
-                              "fraction": ceil / stage if stage > 0 else float("nan")})
+                              "fraction": ceil / stage if stage > 0 else float("nan"),
+                              "bound": bound_what, "bound_ns_per_trial": bound,
+                              "bound_fraction": bound / stage if stage > 0 else float("nan")})
     out["total_ns_per_trial"] = statistics.median(spent["total"]) * scale
     return out
 
@@ -222,6 +292,13 @@ def format_roofline(r: dict[str, Any]) -> list[str]:
                      f"{s['ceiling_ns_per_trial']:>16.1f}{100 * s['fraction']:>8.0f}%  "
                      f"{s['ceiling']}")
     lines.append(f"  {'total':<13}{total:>9.1f}   100%  ({1e3 / total:.1f} M trials/s)")
+    binding = [s for s in r["stages"] if "bound" in s and s["bound"] != s["ceiling"]]
+    if binding:
+        lines.append("  the work that binds where a memory copy does not:")
+        for s in binding:
+            lines.append(f"  {s['stage']:<13}{s['ns_per_trial']:>9.1f}{'':>7}  "
+                         f"{s['bound_ns_per_trial']:>16.1f}{100 * s['bound_fraction']:>8.0f}%  "
+                         f"{s['bound']}")
     return lines
 
 
