@@ -1,0 +1,100 @@
+"""Seed 003's one-calibration fit against values derived by hand: degrees of freedom, the
+weighting of heading and pitch, the a-posteriori sigma and the per-mirror consistency angle."""
+
+import math
+
+import numpy as np
+import pytest
+
+from montecarlo.seed003 import fit as cf
+from montecarlo.seed003 import model as col
+from montecarlo.units import ARCSEC
+
+A = ARCSEC
+
+
+def test_two_mirrors_at_two_elevations_are_the_fewest_for_three_parameters():
+    """frame_heading, gamma, lambda: 3 parameters; 2 mirrors give 4 readings, dof 1 (gamma is
+    seen through 1/cos el, so the two mirrors need different elevations); 1 mirror is refused
+    with the counts written out."""
+    truth = {"axis_az": 300 * A, "axis_el": -200 * A, "frame_heading": 1.2}
+    az, el = np.array([0.0, 0.5]), np.array([0.1, 0.7])
+    heading, pitch = col.predict_readings(truth, az, el)
+    f = cf.fit(az, el, heading, pitch, sigma=2 * A)
+    assert f.dof == 1 and cf.min_mirrors(3) == 2 and cf.min_mirrors(5) == 3
+    for k, v in truth.items():
+        assert f.params[k] == pytest.approx(v, abs=1e-6 * A), k
+    with pytest.raises(cf.NotSeparable,
+                       match=r"^1 mirrors give 2 readings; 3 parameters need at least 2 mirrors$"):
+        cf.fit(az[:1], el[:1], heading[:1], pitch[:1])
+    az10, el10, _ = col.paper_layout()
+    h10, p10 = col.predict_readings(truth, az10, el10)
+    assert cf.fit(az10, el10, h10, p10).dof == 17  # 20 readings, 3 parameters
+
+
+def _design(el):
+    """Linearised design of heading = az + h0 - gamma / cos el, pitch = el - lambda (level
+    mount, small offsets): columns frame_heading, axis_az, axis_el."""
+    m = el.size
+    X = np.zeros((2 * m, 3))
+    X[:m, 0] = 1.0
+    X[:m, 1] = -1.0 / np.cos(el)
+    X[m:, 2] = -1.0
+    return X
+
+
+def test_heading_and_pitch_are_weighted_by_their_own_sigma():
+    """sigma = (1", 7"): the covariance is ``(X' W X)^-1`` with W = diag(1/sigma_h^2 for the
+    headings, 1/sigma_p^2 for the pitches) of the linearised design (to 1e-3, the size of the
+    linearisation error for offsets of 20")."""
+    truth = {"axis_az": 20 * A, "axis_el": 20 * A, "frame_heading": 0.1}
+    az, el, _ = col.paper_layout()
+    heading, pitch = col.predict_readings(truth, az, el)
+    s_h, s_p = 1 * A, 7 * A
+    f = cf.fit(az, el, heading, pitch, sigma=(s_h, s_p))
+    X = _design(el)
+    w = np.concatenate([np.full(el.size, s_h ** -2), np.full(el.size, s_p ** -2)])
+    ref = np.linalg.inv(X.T @ (w[:, None] * X))
+    np.testing.assert_allclose(f.covariance, ref, rtol=1e-3, atol=1e-3 * ref.max())
+    assert f.sigma == (s_h, s_p) and f.sigma_source == "given"
+
+
+def test_a_posteriori_sigma_is_the_rms_residual_over_the_degrees_of_freedom():
+    """sigma=None: equal weights, one sigma ``sqrt(sum r^2 / dof)`` over headings and pitches,
+    and the covariance is ``s^2 (X'X)^-1``; the values are those of any equal given sigma,
+    and chi2 with that sigma is the dof (to 1e-4: sigma comes from the last pass, fitted to the
+    corrected readings, which weight the residuals very slightly differently)."""
+    truth = {"axis_az": 40 * A, "axis_el": -30 * A, "frame_heading": -2.0}
+    az, el, _ = col.paper_layout(7, 7)
+    rng = np.random.default_rng(8)
+    heading, pitch = col.predict_readings(truth, az, el)
+    heading = heading + 3 * A * rng.standard_normal(az.size)
+    pitch = pitch + 3 * A * rng.standard_normal(az.size)
+    f = cf.fit(az, el, heading, pitch)
+    s = math.sqrt(np.sum(f.residuals ** 2) / f.dof)
+    assert f.dof == 2 * 14 - 3 and f.sigma_source == "a posteriori"
+    assert f.sigma[0] == f.sigma[1] == pytest.approx(s, rel=1e-4)
+    assert f.chi2 == pytest.approx(f.dof, rel=1e-4)
+    X = _design(el)
+    ref = s**2 * np.linalg.inv(X.T @ X)
+    np.testing.assert_allclose(f.covariance, ref, rtol=1e-3, atol=1e-3 * ref.max())
+    given = cf.fit(az, el, heading, pitch, sigma=5 * A)
+    np.testing.assert_allclose(given.values, f.values, rtol=0, atol=1e-6 * A)
+    # without the offsets (frame heading refitted) the pitch residuals are -lambda on average,
+    # within 4 standard errors of a mean of 14 readings (4 x 3"/sqrt(14) = 3.2")
+    assert np.mean(f.residuals_before[:, 1]) == pytest.approx(30 * A, abs=4 * 3 * A / math.sqrt(14))
+
+
+def test_consistency_angle_is_the_offset_size_at_every_mirror():
+    """Readings of an INS whose optical axis is its own axis (no offsets, rolled mounts), checked
+    against offsets gamma, lambda: the INS attitude C puts e_y on each mirror normal w, so the
+    angle between ``C u`` and w is the angle between u and e_y, ``arccos(cos gamma cos lambda)``,
+    at every mirror whatever its roll."""
+    az, el, _ = col.paper_layout()
+    roll = np.linspace(-0.3, 0.3, az.size)
+    heading, pitch = col.predict_readings({"frame_heading": 0.4}, az, el, roll)
+    g, lam = 300 * A, 400 * A
+    angle = cf.consistency_angles({"axis_az": g, "axis_el": lam, "frame_heading": 0.4}, az, el,
+                                  heading, pitch, roll)
+    assert angle.shape == az.shape
+    np.testing.assert_allclose(angle, math.acos(math.cos(g) * math.cos(lam)), rtol=1e-9)
