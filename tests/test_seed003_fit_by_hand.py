@@ -57,6 +57,13 @@ def test_heading_and_pitch_are_weighted_by_their_own_sigma():
     ref = np.linalg.inv(X.T @ (w[:, None] * X))
     np.testing.assert_allclose(f.covariance, ref, rtol=1e-3, atol=1e-3 * ref.max())
     assert f.sigma == (s_h, s_p) and f.sigma_source == "given"
+    # without the offsets, in radians (not whitened): pitch reads el - lambda, so reading minus
+    # model is -lambda = -20"; the headings -gamma / cos el less their mean (the frame heading
+    # absorbs the mean); both to second order, (|gamma| + |lambda|)^2 / cos^2 60deg = 0.03"
+    second = (40 * A) ** 2 / math.cos(math.radians(60.0)) ** 2
+    np.testing.assert_allclose(f.residuals_before[:, 1], -20 * A, atol=second)
+    h = -20 * A / np.cos(el)
+    np.testing.assert_allclose(f.residuals_before[:, 0], h - h.mean(), atol=second)
 
 
 def test_a_posteriori_sigma_is_the_rms_residual_over_the_degrees_of_freedom():
@@ -98,3 +105,14 @@ def test_consistency_angle_is_the_offset_size_at_every_mirror():
                                   heading, pitch, roll)
     assert angle.shape == az.shape
     np.testing.assert_allclose(angle, math.acos(math.cos(g) * math.cos(lam)), rtol=1e-9)
+
+
+def test_an_unseparable_layout_names_the_two_parameters_it_cannot_tell_apart():
+    """Horizontal mirrors only: gamma moves every heading by -gamma / cos 0 = -gamma, exactly
+    as the frame heading does, so the weakest combination is theirs (equal weights)."""
+    az = np.radians([0.0, 30.0, 60.0, 90.0])
+    heading, pitch = col.predict_readings({"axis_az": 1e-3}, az, np.zeros(4))
+    with pytest.raises(cf.NotSeparable, match=r"^parameters (frame_heading and axis_az|axis_az "
+                       r"and frame_heading) are not separable with these mirrors \(axis_az "
+                       r"needs mirrors at different elevations\)$"):
+        cf.fit(az, np.zeros(4), heading, pitch)
