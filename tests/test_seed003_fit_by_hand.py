@@ -116,3 +116,22 @@ def test_an_unseparable_layout_names_the_two_parameters_it_cannot_tell_apart():
                        r"and frame_heading) are not separable with these mirrors \(axis_az "
                        r"needs mirrors at different elevations\)$"):
         cf.fit(az, np.zeros(4), heading, pitch)
+
+
+def test_the_axis_offsets_must_be_fitted():
+    az, el, _ = col.paper_layout()
+    with pytest.raises(ValueError, match=r"^effects must include 'axis_misalignment'$"):
+        cf.fit(az, el, az, el, effects=("frame_heading",))
+
+
+def test_the_first_pass_fits_the_whole_offset_and_the_next_nothing():
+    """Noise-free readings of gamma = 300", lambda = -400": the first pass of fit -> correct ->
+    refit finds the whole offset, of size hypot(300", 400") = 500"; the readings it corrects
+    then leave less than the tolerance (0.01″), so the loop stops after the second pass."""
+    truth = {"axis_az": 300 * A, "axis_el": -400 * A, "frame_heading": 0.3}
+    az, el, _ = col.paper_layout()
+    heading, pitch = col.predict_readings(truth, az, el)
+    f = cf.fit(az, el, heading, pitch, sigma=2 * A)
+    assert len(f.passes) == 2
+    assert f.passes[0] == pytest.approx(500 * A, rel=1e-6)
+    assert f.passes[1] < 0.01 * A
