@@ -42,10 +42,15 @@ def test_a_left_roll_mirror_gives_the_same_frame_as_a_right_one_on_its_own_side(
 
 def test_frame_from_axes_normalises_its_inputs():
     """y along the centre's axis (0, 2, 0), x along the roll axis's part orthogonal to it,
-    (3, 3, 0) -> (1, 0, 0), z = x cross y = (0, 0, 1); on the left x and z turn over."""
+    (3, 3, 0) -> (1, 0, 0), z = x cross y = (0, 0, 1); on the left x and z turn over. A batch:
+    centre (2, 0, 0) and roll axis (1, 0, -4) give y = (1, 0, 0), x = (0, 0, -1),
+    z = (0, -1, 0), each row on its own."""
     np.testing.assert_allclose(ref.frame_from_axes([0, 2, 0], [3, 3, 0]), np.eye(3), atol=1e-15)
     np.testing.assert_allclose(ref.frame_from_axes([0, 2, 0], [3, 3, 0], LEFT),
                                np.diag([-1.0, 1.0, -1.0]), atol=1e-15)
+    batch = ref.frame_from_axes([[0, 2, 0], [2, 0, 0]], [[3, 3, 0], [1, 0, -4]])
+    np.testing.assert_allclose(batch[0], np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(batch[1], [[0, 1, 0], [0, 0, -1], [-1, 0, 0]], atol=1e-15)
 
 
 @pytest.mark.parametrize("side", [1.0, -1.0])
