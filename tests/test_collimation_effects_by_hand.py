@@ -23,6 +23,7 @@ def test_paper_mirrors_are_seven_and_seven_named_by_set():
     np.testing.assert_allclose(np.degrees(m.theodolite_az[:7]), np.arange(7) * 15.0, atol=1e-12)
     np.testing.assert_allclose(np.degrees(m.theodolite_el[7:]), np.arange(1, 8) * 60 / 7,
                                atol=1e-12)
+    assert m.ins_az.shape == m.ins_el.shape == (14,)
     assert not m.ins_az.any() and not m.ins_el.any() and m.ins_roll is None
     assert ce.min_mirrors() == 2  # frame heading + 2 + 1 dof = 4 readings
 
@@ -56,6 +57,7 @@ def test_raw_residuals_are_reading_minus_model_in_radians():
     np.testing.assert_allclose(r, np.tile([5 * A, -3 * A], (6, 1)), atol=1e-12)
     # the problem whitens them by the sigma given, headings first
     problem = ce.collimation_problem(data, 2 * A)
+    assert problem.system == "collimation"
     np.testing.assert_allclose(problem.residuals(truth), np.r_[np.full(6, 2.5), np.full(6, -1.5)],
                                atol=1e-6)
     assert problem.start["frame_heading"] == pytest.approx(2.0, abs=200 * A)
@@ -129,3 +131,51 @@ def test_the_study_a_report_proposes_splits_the_residual_sigma_equally():
     assert [a[0] for a in view.axes] == ["theodolite elevation [deg]",
                                          "theodolite azimuth [deg]", "mirror (file order)"]
     np.testing.assert_allclose(view.axes[0][1], np.degrees(layout.theodolite_el))
+
+
+def test_simulation_is_seeded_and_draws_one_error_per_reading():
+    layout = ce.paper_mirrors()
+    a, b, c = (ce.simulate(layout, {}, col.Noise(), seed) for seed in (4, 4, 5))
+    np.testing.assert_array_equal(a.ins_az, b.ins_az)
+    assert not np.array_equal(a.ins_az, c.ins_az)
+    for got, true in ((a.theodolite_az, layout.theodolite_az),
+                      (a.theodolite_el, layout.theodolite_el),
+                      (a.ins_az, layout.theodolite_az), (a.ins_el, layout.theodolite_el)):
+        assert np.std(col.wrap(got - true)) > 0.3 * 2 * A  # 14 draws, not one shared
+    rolled = ce.simulate(layout, {}, col.Noise(mount_roll=0.01), 4)
+    assert np.std(rolled.ins_roll) > 0.003
+    # a recorded roll column stays recorded on a level mount
+    recorded = MirrorData(layout.mirror, layout.sets, layout.theodolite_az, layout.theodolite_el,
+                          layout.ins_az, layout.ins_el, np.zeros(14))
+    assert ce.simulate(recorded, {}, col.Noise(), 4).ins_roll is not None
+
+
+def test_simulated_heading_scale_is_about_the_mean_true_heading():
+    """No reading error, frame heading 0.4, heading scale 1e-3: the true headings are az + 0.4,
+    their (circular) mean is ``arg(sum exp(i az)) + 0.4``, so the INS reports
+    ``az + 0.4 + 1e-3 (az - arg sum exp(i az))``. The exact problem of a truth has no residual
+    at it (without a heading scale: the problem takes its scale reference from the reported
+    headings, a constant the frame heading absorbs)."""
+    layout = ce.paper_mirrors()
+    truth = {"frame_heading": 0.4, "ins_heading_scale": 1e-3}
+    d = ce.simulate(layout, truth, col.Noise(0, 0, 0, 0, 0), 1)
+    az = layout.theodolite_az
+    mean = math.atan2(np.sin(az).sum(), np.cos(az).sum())
+    np.testing.assert_allclose(d.ins_az - az - 0.4, 1e-3 * (az - mean), atol=1e-15)
+    np.testing.assert_allclose(d.ins_el, layout.theodolite_el, atol=1e-15)
+    truth = {"frame_heading": 0.4, "axis_el": 50 * A, "ins_pitch_scale": 1e-4}
+    r = ce.exact_problem(layout, truth, 2 * A).residuals(truth)
+    assert np.abs(r).max() < 1e-9
+
+
+def test_simulated_mount_roll_turns_the_offsets():
+    """No reading error, rolled mount: a horizontal mirror's pitch is
+    ``-(lambda cos phi - gamma sin phi)`` to first order at the roll phi the INS reports."""
+    az = np.zeros(500)
+    layout = MirrorData(tuple(f"M{i}" for i in range(500)), ("azimuth",) * 500, az, az, az, az)
+    g, lam = 200 * A, 100 * A
+    d = ce.simulate(layout, {"axis_az": g, "axis_el": lam}, col.Noise(0, 0, 0, 0, 0.3), 2)
+    phi = d.ins_roll
+    np.testing.assert_allclose(d.ins_el, -(lam * np.cos(phi) - g * np.sin(phi)),
+                               atol=3 * (g + lam) ** 2)
+    assert np.std(phi) > 0.2
