@@ -22,6 +22,11 @@ def test_autocollimate_with_the_optical_axis_on_the_ins_axis_reads_the_target():
     heading, pitch = col.autocollimate([0.0, 1.0, 0.0], col.direction(0.3, 0.2))
     assert heading == pytest.approx(0.3, abs=1e-15)
     assert pitch == pytest.approx(0.2, abs=1e-15)
+    # an optical axis 0.01 rad to the right, level (default roll 0), on a horizontal target at
+    # azimuth 0.3: the INS turns 0.01 less, heading 0.29, pitch 0
+    heading, pitch = col.autocollimate(col.direction(0.01, 0.0), col.direction(0.3, 0.0))
+    assert heading == pytest.approx(0.29, abs=1e-15)
+    assert pitch == pytest.approx(0.0, abs=1e-15)
 
 
 def test_autocollimate_gives_nan_without_a_warning_where_no_pitch_reaches():
