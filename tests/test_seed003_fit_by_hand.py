@@ -135,3 +135,30 @@ def test_the_first_pass_fits_the_whole_offset_and_the_next_nothing():
     assert len(f.passes) == 2
     assert f.passes[0] == pytest.approx(500 * A, rel=1e-6)
     assert f.passes[1] < 0.01 * A
+
+
+def test_residuals_before_are_those_of_the_reference_terms_weighted_as_given():
+    """With the frame tilts fitted, the fit without the offsets (frame heading and tilts only)
+    weights headings and pitches by the sigmas given, (1", 10"). Reference: scipy's
+    least_squares of the same weighted residuals of the forward model, run here."""
+    from scipy.optimize import least_squares
+
+    az, el, _ = col.paper_layout(6, 6)
+    rng = np.random.default_rng(21)
+    truth = {"axis_az": 60 * A, "axis_el": -40 * A, "frame_heading": 0.2,
+             "frame_tilt_x": 10 * A, "frame_tilt_y": -15 * A}
+    heading, pitch = col.predict_readings(truth, az, el)
+    heading = heading + 1 * A * rng.standard_normal(az.size)
+    pitch = pitch + 10 * A * rng.standard_normal(az.size)
+    f = cf.fit(az, el, heading, pitch, sigma=(1 * A, 10 * A),
+               effects=(*col.BASE_EFFECTS, "frame_misalignment"))
+
+    def weighted(x):
+        h, p = col.predict_readings({"frame_heading": x[0], "frame_tilt_x": x[1],
+                                     "frame_tilt_y": x[2]}, az, el)
+        return np.r_[col.wrap(heading - h) / (1 * A), (pitch - p) / (10 * A)]
+
+    x = least_squares(weighted, [0.2, 0.0, 0.0], xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    r = weighted(x)
+    np.testing.assert_allclose(f.residuals_before[:, 0], r[:az.size] * A, atol=1e-4 * A)
+    np.testing.assert_allclose(f.residuals_before[:, 1], r[az.size:] * 10 * A, atol=1e-4 * A)
