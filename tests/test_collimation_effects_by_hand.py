@@ -112,17 +112,26 @@ def test_the_study_a_report_proposes_splits_the_residual_sigma_equally():
     (RMS, not RSS); the fitted values and the effects fitted beyond the base are passed on."""
     layout = ce.paper_mirrors(3, 3)
     view = ce.report_view(layout, 2 * A)
-    fit = LeastSquaresFit(names=("frame_heading", "axis_az", "axis_el"),
-                          values=np.array([0.5, 10 * A, -20 * A]), covariance=np.eye(3),
-                          residual=np.zeros(12), jacobian=np.zeros((12, 3)),
-                          effects=("frame_heading", "axis_misalignment", "outlier:A1"))
+    fit = LeastSquaresFit(names=("frame_heading", "axis_az", "axis_el", "theodolite_c"),
+                          values=np.array([0.5, 10 * A, -20 * A, 0.0]), covariance=np.eye(4),
+                          residual=np.zeros(12), jacobian=np.zeros((12, 4)),
+                          effects=("frame_heading", "axis_misalignment", "outlier:A1",
+                                   "theodolite_collimation"))
     params = view.study_params(fit)
     assert params["theodolite_sigma"] == pytest.approx(math.sqrt(2) * A, rel=1e-15)
     assert params["ins_sigma"] == pytest.approx(math.sqrt(2) * A, rel=1e-15)
     assert params["mount_roll_sigma"] == 0.0 and params["diagnose"] == 0
     assert params["frame_heading"] == 0.5 and params["axis_el"] == -20 * A
     assert params["theodolite_c"] == 0.0
-    assert params["fit_effects"] == "axis_misalignment"
+    assert params["fit_effects"] == "axis_misalignment,theodolite_collimation"
+    assert (view.system, view.rms_unit, view.rms_scale, view.components) == (
+        "collimation", "arcsec", A, ("heading", "pitch"))
+    assert view.study_system == "discrepancy_collimation"
+    assert view.shift_unit("ins_pitch_scale") == ("ppm", 1e-6)
+    data = MirrorData(layout.mirror, layout.sets, layout.theodolite_az, layout.theodolite_el,
+                      layout.theodolite_az + 0.5 + 3 * A, layout.theodolite_el)
+    np.testing.assert_allclose(ce.report_view(data, 2 * A).raw_residuals({"frame_heading": 0.5}),
+                               np.tile([3 * A, 0.0], (6, 1)), atol=1e-12)
     assert json.loads(params["layout"]) == layout.layout()
     assert view.display_unit("axis_az") == ("arcsec", A)
     assert view.display_unit("ins_pitch_scale") == ("ppm", 1e-6)
@@ -144,6 +153,8 @@ def test_simulation_is_seeded_and_draws_one_error_per_reading():
         assert np.std(col.wrap(got - true)) > 0.3 * 2 * A  # 14 draws, not one shared
     rolled = ce.simulate(layout, {}, col.Noise(mount_roll=0.01), 4)
     assert np.std(rolled.ins_roll) > 0.003
+    read = ce.simulate(layout, {}, col.Noise(ins_roll=11 * A, mount_roll=1e-12), 4)
+    assert np.std(read.ins_roll) > 0.3 * 11 * A
     # a recorded roll column stays recorded on a level mount
     recorded = MirrorData(layout.mirror, layout.sets, layout.theodolite_az, layout.theodolite_el,
                           layout.ins_az, layout.ins_el, np.zeros(14))
@@ -166,6 +177,25 @@ def test_simulated_heading_scale_is_about_the_mean_true_heading():
     truth = {"frame_heading": 0.4, "axis_el": 50 * A, "ins_pitch_scale": 1e-4}
     r = ce.exact_problem(layout, truth, 2 * A).residuals(truth)
     assert np.abs(r).max() < 1e-9
+    # with a recorded roll column the exact problem's rolls carry no error either
+    rolls = MirrorData(layout.mirror, layout.sets, az, layout.theodolite_el, layout.ins_az,
+                       layout.ins_el, np.linspace(-0.2, 0.2, az.size))
+    truth = {"frame_heading": 0.4, "axis_az": 300 * A, "axis_el": 50 * A}
+    assert np.abs(ce.exact_problem(rolls, truth, 2 * A).residuals(truth)).max() < 1e-9
+
+
+def test_simulated_heading_scale_reference_is_the_mean_true_heading_of_the_rolled_mount():
+    """As above with an axis offset (the true heading depends on the elevation) and a rolled
+    mount (and on the roll): the reference is the circular mean of the true headings, those
+    of the forward model at the true rolls (reported without error)."""
+    layout = ce.paper_mirrors()
+    geometric = {"frame_heading": 0.4, "axis_az": 600 * A}
+    d = ce.simulate(layout, {**geometric, "ins_heading_scale": 1e-3},
+                    col.Noise(0, 0, 0, 0, mount_roll=0.3), 6)
+    h, _ = col.predict_readings(geometric, layout.theodolite_az, layout.theodolite_el,
+                                d.ins_roll)
+    mean = math.atan2(np.sin(h).sum(), np.cos(h).sum())
+    np.testing.assert_allclose(d.ins_az - h, 1e-3 * (h - mean), atol=1e-15)
 
 
 def test_simulated_mount_roll_turns_the_offsets():
