@@ -166,3 +166,42 @@ def test_acceptance_trials_report_errors_against_the_truth_drawn():
     assert len(pr.ACCEPTANCE_CASES) == 16
     assert pr.ACCEPTANCE_CASES["pitch to 60°, relative, free, left"] == (
         "pitch to 60°", False, "free", -1.0)
+
+
+@pytest.mark.parametrize(("rows", "roll"), [(True, "recorded"), (True, "level"),
+                                            (False, "level"), (False, "recorded")])
+def test_corrected_readings_meet_the_mirror_angles(rows, roll):
+    """No reading error, central mirror at azimuth 0.2, rolled mount where recorded: the
+    theodolite's angles relative to the central and the roll mirror are ``(az - 0.2, el)``; the
+    readings corrected with the fitted offsets meet them; with the offsets set to zero the
+    corrected readings deviate by the first-order form of docs/collimation.md
+    (``gamma (1 - 1/cos el) + lambda tan el (sin a - cos a)``, ``-lambda (1 - cos a - sin a)``,
+    a = az - 0.2, all rolls 0; second order below (|gamma| + |lambda|)^2 = 0.4")."""
+    import dataclasses
+
+    g, lam = 80 * A, 50 * A
+    mount = 0.02 if roll == "recorded" else 0.0
+    d = pr.simulate_procedure(g, lam, AZ, EL, Noise(0, 0, 0, 0, mount), 9, az_center=0.2,
+                              frame_heading=0.7, reference_rows=rows,
+                              with_roll=roll == "recorded")
+    f = pr.fit_procedure(d, sigma_ins=2 * A, sigma_theodolite=2 * A, before=False)
+    c_az, c_el, t_az, t_el, rel_roll = pr.corrected_and_theodolite(d, f)
+    tol = 1e-3 * A if rows or roll == "level" else 0.5 * A  # fitted reference rolls: a prior
+    center = pr.central_azimuth(d, f)
+    assert center == pytest.approx(0.2, abs=tol)
+    np.testing.assert_allclose(wrap(t_az - (AZ - center)), 0.0, atol=1e-14)
+    np.testing.assert_allclose(t_el, EL, atol=1e-14)
+    np.testing.assert_allclose(wrap(c_az - t_az), 0.0, atol=tol)
+    np.testing.assert_allclose(c_el - t_el, 0.0, atol=tol)
+    assert rel_roll.shape == AZ.shape
+    if roll == "level":
+        values = f.values.copy()
+        values[:2] = 0.0
+        zero = dataclasses.replace(f, values=values)
+        c_az, c_el, t_az, t_el, _ = pr.corrected_and_theodolite(d, zero)
+        a = AZ - 0.2 if rows else AZ - f.params["reference_az"]
+        second = (g + lam) ** 2
+        h = g * (1 - 1 / np.cos(EL)) + lam * np.tan(EL) * (np.sin(a) - np.cos(a))
+        if rows:  # with the reference azimuth fitted, a constant heading shift is absorbed
+            np.testing.assert_allclose(wrap(c_az - t_az), h, atol=second)
+        np.testing.assert_allclose(c_el - t_el, -lam * (1 - np.cos(a) - np.sin(a)), atol=second)
