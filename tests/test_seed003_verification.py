@@ -101,19 +101,22 @@ def test_without_row_keeps_the_reference_rows_and_their_roles():
 
 
 def test_leave_one_out_shows_a_blunder_at_its_own_mirror():
-    """No reading error except 30" added to one pitch mirror's INS pitch reading: left out,
-    the other nine give the true offsets exactly, so that mirror's corrected pitch deviates from
+    """No reading error except 30" added to one pitch mirror's INS pitch reading, readings
+    relative to a reference with the roll mirror on the left (the fits must be told the
+    side), level mount: left out, the other nine give the
+    true offsets exactly, so that mirror's corrected pitch deviates from
     the theodolite by the 30" (its heading by a second-order amount, below
     30" x (|gamma| + |lambda|) = 0.05"), and the offsets recorded for it are the
     true ones."""
     g, lam = 200 * A, -150 * A
-    data = pr.simulate_procedure(g, lam, AZ, EL, Noise(0, 0, 0, 0, 0), 5)
-    j = 7  # measured mirror 7 is row 9: a pitch mirror
+    data = pr.simulate_procedure(g, lam, AZ, EL, Noise(0, 0, 0, 0, 0), 5, side=-1.0,
+                                 reference_rows=False, with_roll=False)
+    j = 7  # a pitch mirror (relative readings: no reference rows)
     ins_el = data.ins_el.copy()
-    ins_el[j + 2] += 30 * A
+    ins_el[j] += 30 * A
     bad = pr.ProcedureData(data.theodolite_az, data.theodolite_el, data.ins_az, ins_el,
                            data.ins_roll, data.center, data.roll_mirror)
-    check = vf.leave_one_out(bad, **OPTIONS)
+    check = vf.leave_one_out(bad, **{**OPTIONS, "side": -1.0})
     assert check.deviation_el[j] == pytest.approx(30 * A, abs=1e-3 * A)
     assert abs(check.deviation_az[j]) < 30 * A * (abs(g) + abs(lam))
     np.testing.assert_allclose(check.offsets[j], [g, lam], atol=1e-4 * A)
