@@ -36,6 +36,10 @@ def test_offsets_left_uncorrected_deviate_by_the_first_order_form():
     assert check.max_deviation == pytest.approx(max(np.abs(d_az).max(), np.abs(d_el).max()),
                                                 abs=second)
     assert check.max_deviation > 20 * A and not check.holds
+    # the residuals of that fit, reading minus model, are the same deviations per column
+    f = vf.apply_offsets(data, 0.0, 0.0, **OPTIONS)
+    np.testing.assert_allclose(f.residuals[:, 0], d_az, atol=second)
+    np.testing.assert_allclose(f.residuals[:, 1], d_el, atol=second)
     np.testing.assert_array_equal(check.offsets, np.zeros((AZ.size, 2)))
     # the true offsets leave nothing
     check = vf.verify(data, g, lam, **OPTIONS)
@@ -56,6 +60,8 @@ def test_applied_offsets_fit_only_what_belongs_to_the_new_set(rows, roll, expect
                                  reference_rows=rows, with_roll=roll == "recorded")
     f = vf.apply_offsets(data, g, lam, **{**OPTIONS, "free_roll": roll == "free"})
     assert f.dof == expected_dof and f.sigma_source == "given"
+    assert (f.sigma_ins, f.sigma_theodolite) == (2 * A, 2 * A)
+    assert f.residuals.shape == (AZ.size, 2)
     assert f.values[0] == g and f.values[1] == lam
     assert not f.covariance[:2].any() and not f.covariance[:, :2].any()
     assert np.isnan(f.residuals_before).all() and f.residuals_before.shape == (AZ.size, 2)
