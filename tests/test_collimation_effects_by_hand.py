@@ -26,6 +26,9 @@ def test_paper_mirrors_are_seven_and_seven_named_by_set():
     assert m.ins_az.shape == m.ins_el.shape == (14,)
     assert not m.ins_az.any() and not m.ins_el.any() and m.ins_roll is None
     assert ce.min_mirrors() == 2  # frame heading + 2 + 1 dof = 4 readings
+    small = ce.paper_mirrors(2, 2, azimuth_span=0.6, pitch_span=0.4)
+    np.testing.assert_allclose(small.theodolite_az, [0.0, 0.6, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(small.theodolite_el, [0.0, 0.0, 0.2, 0.4], atol=1e-15)
 
 
 def test_mean_heading_is_circular():
