@@ -187,3 +187,15 @@ def test_the_reason_a_tie_gives_depends_on_reference_rows():
     _, _, choices = cv.fit_with_conventions(with_rows, fit=table)
     assert choices["roll_mirror"].reason == "with reference rows the side does not change the fit"
     assert choices["roll_mirror"].chosen == cv.STATED_SIDE == "right"
+
+
+def test_one_sigma_given_counts_as_given():
+    """Only the INS sigma given: the comparisons use it and None for the theodolite (as
+    ``fit_procedure`` reads it: 0), and the chi2 gap is not scaled (a gap of 5: undecided)."""
+    table = Table(_table({("right", "same"): 20.0, ("left", "same"): 25.0,
+                          ("right", "opposite"): 90.0, ("left", "opposite"): 95.0}))
+    _, _, choices = cv.fit_with_conventions(DATA, fit=table, sigma_ins=2 * ARCSEC)
+    assert all(c[3:5] == (2 * ARCSEC, None) for c in table.calls)
+    assert not choices["roll_mirror"].decided
+    assert choices["roll_mirror"].reason.startswith("chi2 differs by 5 ")
+    assert choices["azimuth_sense"].decided  # 70 in chi2 units
