@@ -199,3 +199,25 @@ def test_one_sigma_given_counts_as_given():
     assert not choices["roll_mirror"].decided
     assert choices["roll_mirror"].reason.startswith("chi2 differs by 5 ")
     assert choices["azimuth_sense"].decided  # 70 in chi2 units
+
+
+@pytest.mark.parametrize(("dof", "right", "left", "decided"), [
+    (1, 4.0, 24.0, False),   # variance factor 4/1: a gap of 20 is 5 units
+    (10, 5.0, 9.0, True),    # variance factor 0.5 (below 1 is allowed): 4 is 8 units
+])
+def test_the_variance_factor_is_the_best_chi2_per_degree_of_freedom(dof, right, left, decided):
+    table = Table(_table({("right", "same"): right, ("left", "same"): left,
+                          ("right", "opposite"): 900.0, ("left", "opposite"): 900.0}), dof=dof)
+    _, _, choices = cv.fit_with_conventions(DATA, fit=table)
+    assert choices["roll_mirror"].decided is decided and choices["roll_mirror"].chosen == "right"
+
+
+def test_given_sigmas_are_not_rescaled_by_free_roll_fits():
+    """sigma given, free rolls: the side fits' gap of 10 is counted in chi2 units (decided),
+    not divided by their variance factor (2.1)."""
+    chi2 = _table({("right", "same"): 20.0, ("left", "same"): 30.0,
+                   ("right", "opposite"): 900.0, ("left", "opposite"): 900.0})
+    _, _, choices = cv.fit_with_conventions(DATA, fit=Table(chi2), free_roll=True,
+                                            sigma_ins=ARCSEC, sigma_theodolite=ARCSEC)
+    assert choices["roll_mirror"].decided and choices["roll_mirror"].chi2 == {
+        "right": 21.0, "left": 31.0}
