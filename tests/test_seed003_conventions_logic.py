@@ -221,3 +221,44 @@ def test_given_sigmas_are_not_rescaled_by_free_roll_fits():
                                             sigma_ins=ARCSEC, sigma_theodolite=ARCSEC)
     assert choices["roll_mirror"].decided and choices["roll_mirror"].chi2 == {
         "right": 21.0, "left": 31.0}
+
+
+def test_tie_tolerances_and_the_warning_names_the_best_option():
+    """The tie tolerance is 1e-9 of the larger of 1 and chi2/scale: for chi2 0.5, 1e-9; for
+    chi2 40 with scale 4, 1e-8 (in variance units)."""
+    c = cv.decide("roll_mirror", {"right": 0.5, "left": 0.5 + 1.5e-9}, "left", None, 1.0, "tie")
+    assert c.reason != "tie" and c.chosen == "right"
+    c = cv.decide("roll_mirror", {"right": 40.0, "left": 40.0 + 2e-7}, "left", None, 4.0, "tie")
+    assert c.reason != "tie" and c.chosen == "right"
+    c = cv.decide("roll_mirror", {"right": 10.0, "left": 40.0}, "left", "left", 1.0, "tie")
+    assert c.warning() == ("warning: the data reject the roll mirror on the left (chi2 40 "
+                           "against 10 for right); kept as asked (left)")
+
+
+def test_the_sense_choice_is_named_and_a_sense_tie_says_why():
+    table = Table(_table({("right", "same"): 20.0, ("left", "same"): 20.0,
+                          ("right", "opposite"): 20.0, ("left", "opposite"): 20.0}))
+    _, _, choices = cv.fit_with_conventions(DATA, fit=table)
+    sense = choices["azimuth_sense"]
+    assert (sense.name, sense.stated, sense.chosen) == ("azimuth_sense", "same", "same")
+    assert sense.reason == "the azimuth mirrors cannot tell the senses apart"
+    _, _, choices = cv.fit_with_conventions(DATA, fit=table, sense="opposite")
+    sense = choices["azimuth_sense"]
+    assert (sense.name, sense.stated, sense.chosen) == ("azimuth_sense", "opposite", "opposite")
+    table = Table(_table({("right", "same"): 900.0, ("left", "same"): 900.0,
+                          ("right", "opposite"): 10.0, ("left", "opposite"): 10.0}))
+    _, _, choices = cv.fit_with_conventions(DATA, fit=table)
+    assert choices["azimuth_sense"].warning().startswith(
+        "warning: the data reject the theodolite azimuth turning the same way as the INS "
+        "heading (chi2 900 against 10 for opposite)")
+
+
+@pytest.mark.parametrize(("dof", "right", "left", "decided"), [(1, 3.0, 23.0, False),
+                                                                (10, 4.0, 8.0, True)])
+def test_free_roll_side_fits_have_their_own_variance_factor(dof, right, left, decided):
+    """Free-roll side fits (chi2 + 1 in the table): 4 and 24 with 1 dof, factor 4, a gap of 5
+    units; 5 and 9 with 10 dof, factor 0.5, a gap of 8 units."""
+    table = Table(_table({("right", "same"): right, ("left", "same"): left,
+                          ("right", "opposite"): 900.0, ("left", "opposite"): 900.0}), dof=dof)
+    _, _, choices = cv.fit_with_conventions(DATA, fit=table, free_roll=True)
+    assert choices["roll_mirror"].decided is decided
