@@ -168,9 +168,11 @@ def test_acceptance_trials_report_errors_against_the_truth_drawn():
         "pitch to 60°", False, "free", -1.0)
 
 
-@pytest.mark.parametrize(("rows", "roll"), [(True, "recorded"), (True, "level"),
-                                            (False, "level"), (False, "recorded")])
-def test_corrected_readings_meet_the_mirror_angles(rows, roll):
+@pytest.mark.parametrize(("rows", "roll", "side"), [(True, "recorded", 1.0), (True, "level", 1.0),
+                                                    (False, "level", 1.0),
+                                                    (False, "recorded", 1.0),
+                                                    (True, "recorded", -1.0)])
+def test_corrected_readings_meet_the_mirror_angles(rows, roll, side):
     """No reading error, central mirror at azimuth 0.2, rolled mount where recorded: the
     theodolite's angles relative to the central and the roll mirror are ``(az - 0.2, el)``; the
     readings corrected with the fitted offsets meet them; with the offsets set to zero the
@@ -183,8 +185,8 @@ def test_corrected_readings_meet_the_mirror_angles(rows, roll):
     mount = 0.02 if roll == "recorded" else 0.0
     d = pr.simulate_procedure(g, lam, AZ, EL, Noise(0, 0, 0, 0, mount), 9, az_center=0.2,
                               frame_heading=0.7, reference_rows=rows,
-                              with_roll=roll == "recorded")
-    f = pr.fit_procedure(d, sigma_ins=2 * A, sigma_theodolite=2 * A, before=False)
+                              with_roll=roll == "recorded", side=side)
+    f = pr.fit_procedure(d, side=side, sigma_ins=2 * A, sigma_theodolite=2 * A, before=False)
     c_az, c_el, t_az, t_el, rel_roll = pr.corrected_and_theodolite(d, f)
     tol = 1e-3 * A if rows or roll == "level" else 0.5 * A  # fitted reference rolls: a prior
     center = pr.central_azimuth(d, f)
