@@ -99,3 +99,24 @@ def test_procedure_figure_curves_by_hand():
         -300 * (1 / math.cos(math.radians(70.0)) - 1), abs=1.0)
     assert figs.procedure_figure(100 * ARCSEC)._suptitle.get_text().startswith(
         "seed 003, section 3.2 procedure: offset 100″")
+
+
+def test_paper_statements_are_the_texts_a_user_reads():
+    """The statements of seed 003, section 2, in the text's order, with what each row shows."""
+    rows = figs.paper_statements()
+    assert [(r["statement"], r["quantity"]) for r in rows] == [
+        ("horizontal pair, azimuth offset: INS change almost equals the mirror change",
+         "max |Δα|, |Δβ| over α in [0, 180°] / γ"),
+        ("horizontal pair, pitch offset: clear difference, especially in pitch",
+         "max |Δβ| / λ (max |Δα| / λ in the next row)"),
+        ("(same)", "max |Δα| / λ"),
+        ("at α = 180°, Δβ is almost twice λ", "Δβ(180°) / λ"),
+        ("(same, with differences of the reported pitch)", "Δβ(180°) / λ, readings"),
+        ("vertical pair, pitch offset: INS change almost equals the mirror change",
+         "max |Δα|, |Δβ| over β in [0, 85°] / λ"),
+        ("vertical pair, azimuth offset: clear difference, especially in azimuth",
+         "max |Δα| / γ over β in [0, 85°]"),
+        ("at β = 60°, Δβ is almost equal to γ", "Δβ(60°) / γ"),
+        ("(the same read as Δα)", "Δα(60°) / γ"),
+    ]
+    assert list(rows[0]) == ["statement", "quantity", "model", "holds"]
