@@ -200,3 +200,50 @@ def test_a_pilot_that_cannot_bound_its_statistic_names_the_trials_needed():
                          hi=(np.nan, 4.375, 4.25, 4.0625))
     plan = planning.pilot_plan(_result(spec, confidence=0.9), nan_value)
     assert plan["trials_to_decide"].isna().tolist() == [True, False, False, False]
+
+
+def test_quantile_level_trials_stored_counts():
+    """Regression (the counts ``plan`` prints): the bisection from 16 trials, doubling, returns
+    these whole numbers. Near-monotone: for the median at +-0.2, 25 trials are already narrow
+    but 26-32 are not all, and the bisection between 16 and 32 returns 33. At 10 trials the
+    median's interval of p = 0.4 reaches rank 1 and that of p = 0.6 reaches rank n."""
+    for p, half, n in ((0.4, 0.35, 10), (0.6, 0.35, 10), (0.5, 0.2, 33), (0.7, 0.2, 27),
+                       (0.95, 0.01, 1900)):
+        got = planning.quantile_level_trials(p, half, 0.95)
+        assert type(got) is int and got == n, (p, half, got)
+    _, r, s = order_statistic_ranks(10, 0.4, 0.95)
+    assert r == 1
+    _, r, s = order_statistic_ranks(10, 0.6, 0.95)
+    assert s == 10
+
+
+def test_counts_are_whole_numbers():
+    assert type(planning.interval_trials(0.95, 0.95)) is int
+    assert type(planning.order_statistic_trials(2, 0.95, 0.95)) is int
+
+
+def test_trials_to_decide_of_a_zero_interval_at_the_limit_is_infinite_without_a_warning():
+    """h = 0 and d = 0: 0/0 is not computed into the result (inf, not NaN) and warns nothing
+    (the test configuration turns warnings into errors)."""
+    assert planning.trials_to_decide(1000, 0.0, 0.0) == np.inf
+    np.testing.assert_array_equal(planning.trials_to_decide([10, 10], [0.0, 1.0], [0.0, 0.0]),
+                                  [np.inf, np.inf])
+
+
+def test_a_superquantile_pilot_that_cannot_bound_it_names_the_trials_of_its_level():
+    """cvar95 is read at level 0.95: both ends from ln(0.025) / ln(0.95) = 71.9, 72 trials."""
+    spec = SimpleNamespace(metric="rotation_angle", statistic="cvar95", limit=4.5,
+                           variant="raw")
+    summary = _summary(stat="cvar95", hi=(np.nan, 4.375, 4.25, np.nan), trials=50)
+    with pytest.raises(InputError, match=r"pilot of 50 trials .* cvar95 at 95% confidence "
+                                         r"\(its interval needs at least 72 trials\)"):
+        planning.pilot_plan(_result(spec), summary)
+
+
+def test_trials_to_decide_stay_integers_when_none_can_be_given():
+    """Every point exactly at the limit: the column is all <NA>, still of integer type."""
+    spec = SimpleNamespace(metric="rotation_angle", statistic="p95", limit=4.0, variant="raw")
+    summary = _summary(verdict=("undecided",) * 4, sampling=("random",) * 4)
+    plan = planning.pilot_plan(_result(spec), summary)
+    assert plan["trials_to_decide"].isna().all()
+    assert str(plan["trials_to_decide"].dtype) == "Int64"
