@@ -50,6 +50,7 @@ def test_base_effect_is_the_pinhole_and_every_pose():
                                "tz_1", "rx_2", "ry_2", "rz_2", "tx_2", "ty_2", "tz_2")
     assert base.steps == (1e-3,) * 3 + (1e-7,) * 12
     assert all(b == (-np.inf, np.inf) for b in base.bounds)
+    assert base.description == "focal length, principal point [px], pose of each view [rad, m]"
 
 
 def test_residuals_are_the_pixel_shifts_over_sigma_in_one_and_in_a_batch(exact):
@@ -68,9 +69,14 @@ def test_residuals_are_the_pixel_shifts_over_sigma_in_one_and_in_a_batch(exact):
     longer = problem.residuals({**truth, "f": truth["f"] + 1.0})
     np.testing.assert_allclose(rows[2], longer, atol=1e-12)
     assert np.abs(rows[2] - rows[0]).min() >= 0.0 and np.abs(rows[2] - rows[0]).max() > 0.1
-    # the start is Zhang's closed form: on noise-free data, the truth
-    assert ce.camera_problem(data, SIGMA).start["f"] == pytest.approx(truth["f"], rel=1e-6)
+    # the start is Zhang's closed form: on noise-free data, the truth, every base parameter
+    start = ce.camera_problem(data, SIGMA).start
+    assert set(start) == set(ce.base_effect(5).parameters)
+    for name, value in truth.items():
+        assert start[name] == pytest.approx(value, rel=1e-6, abs=1e-9), name
     assert problem.system == "camera" and problem.base.parameters[:3] == ("f", "cx", "cy")
+    assert problem.candidates == ce.CANDIDATES and problem.unavailable == {}
+    assert problem.separating_data == ce.SEPARATING_DATA
     assert problem.requires == {"radial_k2": "radial_k1", "radial_k3": "radial_k2"}
 
 
