@@ -86,6 +86,21 @@ def test_field_layout_by_hand():
     assert single.session is None and single.n == 4 and single.t.max() < 3600.0
 
 
+def test_field_layout_defaults():
+    """6 x 6 targets over 80 % of the field at 50 and 100 m, one hour, one session, seed 0."""
+    layout = ge.field_layout(WIDE, MOUNT)
+    explicit = ge.field_layout(WIDE, MOUNT, (50.0, 100.0), (6, 6), 0.8, 3600.0, 1, rng=0)
+    np.testing.assert_array_equal(layout.positions, explicit.positions)
+    np.testing.assert_array_equal(layout.t, explicit.t)
+    assert layout.session is None and layout.n == 36
+    np.testing.assert_allclose(np.sort(layout.t), (np.arange(36) + 0.5) * 100.0)
+    r = np.linalg.norm(layout.positions, axis=1)
+    assert set(np.round(r, 9)) == {50.0, 100.0}
+    C = Rotation.from_euler("ZXY", [MOUNT["psi"], MOUNT["theta"], MOUNT["gamma"]]).as_matrix()
+    r_a = layout.positions @ C
+    assert np.max(r_a[:, 0] / r_a[:, 1]) == pytest.approx(0.8 * math.tan(math.radians(35.0)))
+
+
 def test_simulated_noise_has_the_stated_sigmas():
     """Pixels: predict_pixels of the true positions + N(0, 0.4^2); surveyed positions: true +
     N(0, 0.03^2). 2 x 36 pixel and 3 x 36 position values per set, 20 sets: the variances are
@@ -113,9 +128,22 @@ def test_simulation_uses_the_stated_refraction():
     data = ge.simulate(far, WIDE, MOUNT, 0.0, 0.0, 1, refraction=1.0)
     no_shift = ge.predict_pixels({**MOUNT, "dk": 1.0 - ge.STANDARD_REFRACTION}, far, WIDE)
     np.testing.assert_allclose(data.pixels, no_shift, atol=1e-9)
-    problem = ge.exact_problem(far, WIDE, {**MOUNT, "k1": 0.01}, 0.5, 0.0, refraction=1.0)
-    np.testing.assert_allclose(problem.residuals({**MOUNT, "k1": 0.01}), 0.0, atol=1e-9)
+    np.testing.assert_allclose(ge.raw_residuals(data, WIDE, MOUNT, refraction=1.0), 0.0,
+                               atol=1e-9)
+    truth = {**MOUNT, "k1": 0.01}
+    problem = ge.exact_problem(far, WIDE, truth, 0.5, 0.0, refraction=1.0)
+    np.testing.assert_allclose(problem.residuals(truth), 0.0, atol=1e-9)
+    # whitened by the pixel sigma alone (no survey error): (truth - pinhole) / 0.5
+    k1 = ge.predict_pixels({**MOUNT, "k1": 0.01, "dk": 0.87}, far, WIDE)
+    pinhole = ge.predict_pixels({**MOUNT, "dk": 0.87}, far, WIDE)
+    np.testing.assert_allclose(problem.residuals(MOUNT), ((k1 - pinhole) / 0.5).ravel(),
+                               atol=1e-8)
     assert np.abs(problem.residuals(MOUNT)).max() > 0.1
+    two = ge.field_layout(WIDE, MOUNT, (1000.0,), (2, 2), sessions=2, rng=1)
+    problem = ge.exact_problem(two, WIDE, MOUNT, 0.5, 0.0)
+    assert problem.unavailable == {}
+    assert problem.candidates[-1].parameters == ("psi_shift_S2", "theta_shift_S2",
+                                                 "gamma_shift_S2")
 
 
 def test_raw_residuals_are_measured_minus_predicted_pixels():
@@ -135,6 +163,9 @@ def test_a_target_just_in_front_is_accepted_one_behind_refused_naming_its_row():
     layout = ge.field_layout(WIDE, MOUNT, (40.0,), (3, 3), rng=4)
     data = ge.simulate(layout, WIDE, MOUNT, 0.0, 0.0, 1)
     ge.check_in_front(data, WIDE, "g.csv")  # nothing raised
+    near = data.positions.copy()
+    near[0] *= 0.5 / np.linalg.norm(near[0])  # half a metre in front
+    ge.check_in_front(GroundData(data.targets, near, data.pixels, data.t), WIDE, "g.csv")
     positions = data.positions.copy()
     positions[2] *= -1.0
     behind = GroundData(data.targets, positions, data.pixels, data.t)
