@@ -211,6 +211,8 @@ def test_report_view_axes_and_the_study_parameters_of_a_fit():
     np.testing.assert_allclose(view.raw_residuals(MOUNT), ge.raw_residuals(
         data, WIDE, MOUNT, 0.2), atol=0)
     assert view.shift_unit("psi") == ("mrad", MRAD)
+    assert view.display_unit("psi") == ("deg", math.pi / 180.0)
+    assert view.base_physics == {"earth_curvature": True, "refraction_k": 0.2}
     fit = SimpleNamespace(params={**MOUNT, "s": 1e-3, "theta_shift_S2": 2e-4},
                           effects=("mounting", "focal_scale", "outlier:T03@S1",
                                    "session_shift"))
