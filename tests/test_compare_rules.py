@@ -237,3 +237,38 @@ def test_load_run_reads_a_result_and_refuses_anything_else_in_one_line(tmp_path)
 def test_verdict_counts_every_verdict_also_those_absent():
     table = pd.DataFrame({"verdict": ["same", "worse", "same", "undecided"]})
     assert verdict_counts(table) == {"same": 2, "better": 0, "worse": 1, "undecided": 1}
+
+
+def test_the_default_statistic_is_the_p95_and_the_columns_are_the_documented_ones():
+    a = _run("h", [1.0, 0.0], lo=[0.5, -1.0], hi=[1.5, 1.0])
+    b = _run("h", [2.0, 0.0], lo=[1.5, -1.0], hi=[2.5, 1.0])
+    t = compare_runs(a, b)
+    assert set(t["statistic"]) == {"p95"}
+    assert list(t.columns) == ["point", "geometry.L_m", "variant", "metric", "unit",
+                               "statistic", "a", "b", "diff", "diff_lo", "diff_hi", "rel_diff",
+                               "comparison", "verdict"]
+    assert list(t["b"]) == [2.0, 0.0] and list(t.index) == [0, 1]
+    # 0 against 0: no relative difference, and no 0/0 warning (warnings are errors here)
+    assert math.isnan(t["rel_diff"][1]) and t["verdict"][1] == "same"
+
+
+def test_a_provenance_without_the_resolved_study_is_read_at_95_percent():
+    """Half-width of one row of widths 6 and 8 is 5 whatever the confidence (both the runs'
+    own z and the simultaneous z are the same at m = 1), so the provenance has to lack the
+    block for the default to be seen: with 3 rows the half-width is 5 z_3 / z_1 at 0.95."""
+    kw = {"lo": [-3.0] * 3, "hi": [3.0] * 3}
+    a, b = _run("a", [0.0] * 3, **kw), _run("b", [1.0] * 3, lo=[-3.0] * 3, hi=[5.0] * 3)
+    for prov in ({"kind": "run", "study": "hand", "study_hash": "a"},
+                 {"kind": "run", "study": "hand", "study_hash": "a", "resolved_study": {}}):
+        t = compare_runs(Run("x", a.summary, prov), b, "p95")
+        np.testing.assert_allclose(t["diff_hi"] - t["diff"],
+                                   5.0 * norm.ppf(1 - 0.05 / 6) / norm.ppf(0.975), rtol=1e-12)
+
+
+def test_a_standard_error_of_zero_over_zero_is_undecided_without_a_warning():
+    """The std of one trial (std 0, n - 1 = 0) and a mean of no trials (std 0, n = 0): the
+    standard error 0/0 is not a number and the row undecided; warnings are errors here."""
+    for stat, count in (("std", 1), ("mean", 0)):
+        t = compare_runs(_run("a", [1.0], stat=stat, count=count, std=0.0),
+                         _run("b", [2.0], stat=stat, count=count, std=0.0), stat)
+        assert list(t["verdict"]) == ["undecided"], stat
