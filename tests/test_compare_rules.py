@@ -268,7 +268,7 @@ def test_a_provenance_without_the_resolved_study_is_read_at_95_percent():
 def test_a_standard_error_of_zero_over_zero_is_undecided_without_a_warning():
     """The std of one trial (std 0, n - 1 = 0) and a mean of no trials (std 0, n = 0): the
     standard error 0/0 is not a number and the row undecided; warnings are errors here."""
-    for stat, count in (("std", 1), ("mean", 0)):
-        t = compare_runs(_run("a", [1.0], stat=stat, count=count, std=0.0),
-                         _run("b", [2.0], stat=stat, count=count, std=0.0), stat)
+    for stat, count, value in (("std", 1, 0.0), ("mean", 0, 1.0)):
+        t = compare_runs(_run("a", [value], stat=stat, count=count, std=0.0),
+                         _run("b", [value], stat=stat, count=count, std=0.0), stat)
         assert list(t["verdict"]) == ["undecided"], stat
