@@ -150,3 +150,10 @@ def test_table2_text_has_the_papers_columns_over_its_numbers():
     ends = [m.end() for m in re.finditer(r"\S+", first)]
     assert [m.end() for m in re.finditer(r"\S+", names)] == ends
     assert [m.end() for m in re.finditer(r"\S+", units.replace("x √2", "x_√2"))] == ends
+
+
+def test_table2_grid_defaults_seed_0_and_100_runs():
+    """``montecarlo transfer-alignment`` reports 100 runs per grade, seeded with 0."""
+    default = t2.table2_grid(SHORT)
+    assert (default["runs"] == 100).all()
+    pd.testing.assert_frame_equal(default, t2.table2_grid(SHORT, rng=0, runs=100))
