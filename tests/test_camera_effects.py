@@ -121,6 +121,7 @@ def test_raw_residuals_and_the_radial_split_of_the_report(exact):
                                                                 1), atol=1e-6)
     assert view.base_physics == {"pixel_sigma_px": SIGMA}
     assert view.rms_unit == "px" and view.rms_scale == 1.0 and view.study_params(None) == {}
+    assert view.study_system == ""  # no study system simulates camera data sets
 
 
 def _diagnosis(data, params, n_names, flagged=(), tests=()):
@@ -181,6 +182,12 @@ def test_pixel_error_by_hand(exact):
     scale0 = math.sqrt(2 * n / (2 * n - 33))
     assert out["sigma_u"] == pytest.approx(
         math.sqrt(np.mean(shift[:, 0] ** 2)) * scale0, rel=1e-9)
+    # an undetectable candidate counts as well: 2 px at corner 9 (0, 8) * 0.25 * 1 beats 1.5
+    tests = [_test("radial_k1", "testable", {"k1": 1.0}, column(5, 3.0, 4.0) * 1.2),
+             _test("radial_k3", "undetectable", {"k3": 1.0}, column(9, 0.0, 8.0))]
+    out = ce.pixel_error(_diagnosis(moved, truth, 33, tests=tests), moved, SIGMA)
+    assert out["distortion_bound"] == pytest.approx(2.0, rel=1e-12)
+    assert out["distortion_source"] == "radial_k3"
     # nothing testable: no bound, no source; an MDB of no parameters or no column is skipped
     none = [_test("radial_k1", "testable", {}, column(5, 3.0, 4.0)),
             _test("radial_k2", "testable", {"k2": 1.0}, None)]
