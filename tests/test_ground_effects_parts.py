@@ -83,6 +83,7 @@ def test_field_layout_by_hand():
     np.testing.assert_allclose(np.sort(layout.t[:6]), (np.arange(6) + 0.5) * 600.0)
     np.testing.assert_allclose(np.sort(layout.t[6:]), (np.arange(6) + 0.5) * 600.0 + 3600.0)
     assert not np.array_equal(layout.t[6:] - 3600.0, layout.t[:6])  # a new order per session
+    assert layout.pixels.shape == (12, 2)
     np.testing.assert_array_equal(layout.pixels, 0.0)
     single = ge.field_layout(WIDE, MOUNT, (40.0,), (2, 2), rng=1)
     assert single.session is None and single.n == 4 and single.t.max() < 3600.0
@@ -192,7 +193,7 @@ def test_report_view_axes_and_the_study_parameters_of_a_fit():
     data = ge.simulate(layout, WIDE, MOUNT, 0.2, 0.0, 6)
     view = ge.report_view(data, WIDE, 0.2, 0.01, refraction=0.2)
     assert view.system == "ground" and view.study_system == "discrepancy_ground"
-    assert view.components == ("px", "pz") and view.rms_unit == "px"
+    assert view.components == ("px", "pz") and view.rms_unit == "px" and view.rms_scale == 1.0
     labels = [a[0] for a in view.axes]
     assert labels == ["image radius (tangent plane) [1]", "range [m]", "target height z [m]",
                       "time t_s [s]"]
