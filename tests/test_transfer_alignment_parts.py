@@ -273,3 +273,43 @@ def test_random_constant_biases_are_drawn_from_their_sigmas():
     phi = res.phi[0]  # after 0.2 s the drift has moved it by 2e-6 at most
     assert np.mean(phi[:, :2] ** 2) == pytest.approx(4e-6, rel=0.2)
     assert np.mean(phi[:, 2] ** 2) == pytest.approx(25e-6, rel=0.25)
+
+
+def test_a_free_running_gyro_drift_turns_the_slave_by_minus_c_b_t():
+    """phi' = -C_b^n b_g (the error model's first block): in level flight with no noise and no
+    updates, phi(T) = -C b_g T per run, T = 10 s (b_g T ~ 1e-4 rad: first order to 1e-4).
+    The error is recorded at every Kalman update, the last one at T itself."""
+    cfg = _free_running(gyro_arw=0.0, accel_vrw=0.0, gyro_drift=1e-5)
+    res = ta.simulate(cfg, np.random.default_rng(7), 20)
+    C = ta.make_truth(cfg).C_bn[0]
+    b_g = res.x_true[:, 6:9]
+    np.testing.assert_allclose(res.phi[-1], -(b_g @ C.T) * 10.0, rtol=2e-3, atol=1e-12)
+    np.testing.assert_allclose(res.phi[0], -(b_g @ C.T) * 0.2, rtol=2e-3, atol=1e-12)
+
+
+def test_a_free_running_accelerometer_bias_moves_the_slave_by_c_b_t():
+    """dv' = C_b^n b_a with no attitude error: dv(T) = C b_a T per run."""
+    cfg = _free_running(gyro_arw=0.0, accel_vrw=0.0, accel_bias=1e-3)
+    res = ta.simulate(cfg, np.random.default_rng(8), 20)
+    C = ta.make_truth(cfg).C_bn[0]
+    b_a = res.x_true[:, 9:12]
+    np.testing.assert_allclose(res.x_true[:, 3:6], (b_a @ C.T) * 10.0, rtol=1e-6, atol=1e-12)
+
+
+def test_an_error_free_slave_stays_on_the_truth_through_a_turn():
+    """No initial error, no bias, no noise in an S-turn: the slave's attitude and velocity stay
+    on the truth (round-off only), from the first step on."""
+    cfg = _free_running(gyro_arw=0.0, accel_vrw=0.0, manoeuvre="s_turn", duration=2.0)
+    res = ta.simulate(cfg, np.random.default_rng(9), 2)
+    assert np.abs(res.phi).max() < 1e-12
+    assert np.abs(res.x_true[:, 3:6]).max() < 1e-9
+
+
+def test_observability_with_attitude_matching_sees_the_mounting_through_c():
+    """Attitude matching: the measurement rows are [0 I 0 0 0; I 0 0 0 -C] for the segment's C."""
+    cfg = ta.AlignmentConfig(attitude_matching=True)
+    C = Rotation.from_euler("z", 0.5).as_matrix()
+    obs = ta.observability_matrix(cfg, [(C, np.array([0.0, 0.0, G0]))])
+    assert obs.shape == (15 * 6, 15)
+    np.testing.assert_array_equal(obs[3:6, 12:15], -C)
+    np.testing.assert_array_equal(obs[3:6, 0:3], np.eye(3))
