@@ -313,3 +313,47 @@ def test_observability_with_attitude_matching_sees_the_mounting_through_c():
     assert obs.shape == (15 * 6, 15)
     np.testing.assert_array_equal(obs[3:6, 12:15], -C)
     np.testing.assert_array_equal(obs[3:6, 0:3], np.eye(3))
+
+
+def test_a_short_period_and_a_slow_speed_are_allowed():
+    """The limits are period > 0 and speed > 0, not 1 s and 1 m/s."""
+    cfg = ta.AlignmentConfig(period=0.5, speed=0.5)
+    assert (cfg.period, cfg.speed) == (0.5, 0.5)
+
+
+def test_two_steps_of_the_covariance_with_an_exact_transition():
+    """Without the mounting states F is nilpotent (b_g -> phi -> dv, b_a -> dv; F^3 = 0), so
+    Phi = I + F dt + (F dt)^2 / 2 equals expm(F dt) exactly at any dt: at dt = 0.1 s with a
+    large gyro drift the second-order term (b_g into dv, g dt^2 / 2) is 5e-4 of the
+    covariances. Two updates, each P- = Phi P Phi' + Q dt (angle and velocity random walk
+    large enough to count) and P+ = (P-^-1 + H' R^-1 H)^-1; attitude matching measures
+    phi - C mu with the attitude after the step, which turns by about a milliradian per step
+    at the start of the S-turn."""
+    cfg = ta.AlignmentConfig(dt=0.1, kf_interval=1, duration=0.2, gyro_drift=1e-3,
+                             gyro_arw=1e-3, accel_vrw=1e-2, attitude_matching=True)
+    truth = ta.make_truth(cfg)
+    cov = ta.covariance_analysis(cfg)
+    P = ta.initial_covariance(cfg)
+    for k in range(2):
+        F = ta._system_matrices(cfg, truth.C_mid[k], truth.f_n[k])
+        assert np.abs(np.linalg.matrix_power(F, 3)).max() == 0.0
+        Phi = expm(F * cfg.dt)
+        prior = Phi @ P @ Phi.T + ta._process_noise(cfg) * cfg.dt
+        H, R = ta.measurement_matrix(cfg, truth.C_bn[k + 1])
+        P = np.linalg.inv(np.linalg.inv(prior) + H.T @ np.linalg.inv(R) @ H)
+        scale = np.sqrt(np.outer(np.diag(P), np.diag(P)))
+        np.testing.assert_allclose(cov.P[k] / scale, P / scale, atol=1e-8)
+    assert np.abs(ta._log(truth.C_bn[2] @ truth.C_bn[0].T)).max() > 1e-3
+
+
+def test_a_strongly_drifting_gyro_is_estimated_and_compensated_consistently():
+    """A 2e-4 rad/s (41 °/h) gyro drift over a 30 s S-turn: the filter learns it, the slave
+    compensates it, and the mean NEES of the final state over 100 runs lies in its chi-square
+    99.9 % interval (the compensation applied with the wrong sign gives a NEES of 3e5)."""
+    from scipy import stats
+
+    runs = 100
+    cfg = ta.AlignmentConfig(gyro_drift=2e-4, duration=30.0)
+    res = ta.simulate(cfg, np.random.default_rng(11), runs)
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], cfg.n_states * runs) / runs
+    assert lo < res.nees().mean() < hi
