@@ -62,9 +62,9 @@ def load_run(path: str | Path) -> Run:
     except (OSError, ValueError):
         raise InputError(f"{path}: no readable {PROVENANCE}; not a result of "
                          "`montecarlo run`") from None
-    if not isinstance(prov, dict) or prov.get("kind") != "run":
-        raise InputError(f"{path}: a result of `montecarlo {prov.get('kind')}`, not of "
-                         "`montecarlo run`")
+    kind = prov.get("kind") if isinstance(prov, dict) else None
+    if kind != "run":
+        raise InputError(f"{path}: a result of `montecarlo {kind}`, not of `montecarlo run`")
     try:
         summary = pd.read_parquet(path / "summary.parquet")
     except (OSError, ValueError):
