@@ -24,6 +24,13 @@ def umask_027():
     os.umask(old)
 
 
+@pytest.fixture
+def umask_022():
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
 def _mode(path):
     return stat.S_IMODE(os.stat(path).st_mode)
 
@@ -44,6 +51,21 @@ def test_with_umask_and_atomic_write_permissions(tmp_path, umask_027):
     files.atomic_write_bytes(str(p), b"second")
     assert p.read_bytes() == b"second" and _mode(p) == 0o640
     assert [x.name for x in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_atomic_write_stages_beside_the_target_with_the_usual_mode(tmp_path, umask_022,
+                                                                    monkeypatch):
+    """The temporary file is ``.NAME.<random>.tmp`` in the target's directory (a rename
+    within one file system); the file ends as 0o666 & ~0o022 = 0o644."""
+    renames = []
+    real = os.replace
+    monkeypatch.setattr(files.os, "replace", lambda a, b: (renames.append((a, b)), real(a, b)))
+    p = tmp_path / "a.txt"
+    files.atomic_write_bytes(p, b"x")
+    (src, dst), = renames
+    assert Path(src).parent == tmp_path and Path(dst) == p
+    assert Path(src).name.startswith(".a.txt.") and Path(src).name.endswith(".tmp")
+    assert _mode(p) == 0o644
 
 
 def test_a_failed_atomic_write_leaves_neither_file_nor_temporary(tmp_path):
@@ -95,6 +117,11 @@ def test_record_and_update_the_list_of_written_files(tmp_path):
     assert text.endswith("}\n") and '\n  "kind": "run"' in text
     assert json.loads(text) == {"kind": "run",
                                 "files": {"a": None, "a/f": 6, "a/g": 0, "b.txt": 1}}
+    (tmp_path / "a" / "g").unlink()  # removed from a replaced entry: gone from the list
+    files.update_written_files(tmp_path, ("a",))
+    assert json.loads((tmp_path / PROVENANCE).read_text())["files"] == {
+        "a": None, "a/f": 6, "b.txt": 1}
+    (tmp_path / "a" / "g").write_bytes(b"")
     assert files.foreign_entries(tmp_path, json.loads(text)) == ["b.txt"]
     assert files.foreign_entries(tmp_path, {"files": [1]}) is None
     (tmp_path / "new").write_bytes(b"")
@@ -151,6 +178,9 @@ def test_output_dir_refusals_in_full(tmp_path, monkeypatch):
     assert _refused(OutputDir(out, "run", {"study": "a"}).check) == (
         f"{out}: holds 1 file(s) this command did not write (first 'mine.txt'), so it is not "
         "wholly an earlier result; choose another output path or move them out")
+    study = out / "study.toml"
+    assert _refused(OutputDir(out, "run", inputs=(str(study),)).check) == (
+        f"{out}: holds the input '{study}'; choose another output path")
     (out / PROVENANCE).write_text("[]")
     assert "is not an earlier result" in _refused(OutputDir(out, "run").check)
     (out / PROVENANCE).write_text(json.dumps({"kind": "run", "files": {"mine.txt": 3}}))
@@ -183,6 +213,29 @@ def test_output_dir_writes_all_or_nothing_and_lists_its_files(tmp_path, umask_02
     with pytest.raises(KeyError), OutputDir(fresh, "run"):
         raise KeyError("stop")
     assert not (tmp_path / "c").exists()  # the directories made for it are gone again
+    with pytest.raises(KeyError), OutputDir(fresh, "run"):
+        (tmp_path / "c" / "other.txt").write_text("")  # someone else's file: c is kept
+        raise KeyError("stop")
+    assert sorted(x.name for x in (tmp_path / "c").iterdir()) == ["other.txt"]
+    (tmp_path / "file").write_text("")
+    below_a_file = tmp_path / "file" / "out"
+    assert _refused(OutputDir(below_a_file, "run").__enter__) == (
+        f"{below_a_file}: cannot write here (File exists)")
+
+
+def test_the_old_result_is_moved_aside_beside_it_before_removal(tmp_path, monkeypatch):
+    made = []
+    real = files.tempfile.mkdtemp
+    monkeypatch.setattr(files.tempfile, "mkdtemp",
+                        lambda **kw: (made.append(kw), real(**kw))[1])
+    out = tmp_path / "out"
+    for _ in range(2):
+        with OutputDir(out, "run") as staging:
+            (staging / PROVENANCE).write_text(json.dumps({"kind": "run"}))
+    assert [m["dir"] for m in made] == [tmp_path] * 3
+    assert made[1]["prefix"] == f".out.tmp-{os.getpid()}-"
+    assert made[2]["prefix"] == f".out.old-{os.getpid()}-"
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["out"]
 
 
 def test_a_second_writer_is_refused_and_a_free_lock_is_taken(tmp_path):
@@ -198,6 +251,14 @@ def test_a_second_writer_is_refused_and_a_free_lock_is_taken(tmp_path):
     (tmp_path / ".out.lock").write_text("99999999\n")  # left by a killed writer: taken over
     with OutputLock(out) as lock:
         assert lock.file.read_text() == f"{os.getpid()}\n"
+    import fcntl
+
+    fd = os.open(tmp_path / ".out.lock", os.O_RDWR | os.O_CREAT | os.O_TRUNC)
+    try:  # held by a writer that has not yet written its pid
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        assert "another process (pid ?) is writing it" in _refused(OutputLock(out).__enter__)
+    finally:
+        os.close(fd)
     missing = tmp_path / "no" / "out"
     assert _refused(OutputLock(missing).__enter__).startswith(f"{missing}: cannot write here (")
 
@@ -205,7 +266,6 @@ def test_a_second_writer_is_refused_and_a_free_lock_is_taken(tmp_path):
 def test_stale_staging_of_dead_processes_only_is_removed(tmp_path):
     dead = 2**22 + 12345  # above the kernel's pid_max of 4194304: no such process
     assert not files._pid_alive(dead) and files._pid_alive(os.getpid())
-    assert files._pid_alive(1)  # init: alive whoever owns it
     names = [f".out.tmp-{dead}-abc", f".out.old-{dead}-abc", f".out.tmp-{os.getpid()}-abc",
              f".out.new-{dead}-abc", ".out.tmp-x1-abc", f".other.tmp-{dead}-abc"]
     for name in names:
@@ -222,10 +282,21 @@ def test_writable_file_refusals_in_full(tmp_path, monkeypatch):
     assert files.writable_file(str(tmp_path / "f.txt")) == tmp_path / "f.txt"
     monkeypatch.chdir(tmp_path)
     assert files.writable_file("g.txt") == Path("g.txt")
-    if os.geteuid() != 0:  # root may write anywhere
-        ro = tmp_path / "ro"
-        ro.mkdir(mode=0o500)
-        assert _refused(files.writable_file, ro / "f") == f"{ro / 'f'}: not writable"
+    # root may write anywhere: os.access is replaced by one that refuses writing to ``ro``
+    # (a directory, asked for write and search) and to the existing file ``ro.txt``
+    ro, ro_file = tmp_path / "ro", tmp_path / "ro.txt"
+    ro.mkdir()
+    ro_file.write_text("")
+
+    def access(path, mode):
+        if Path(path) == ro:
+            return mode & os.W_OK == 0 or mode & os.X_OK == 0
+        return not (Path(path) == ro_file and mode & os.W_OK)
+
+    monkeypatch.setattr(files.os, "access", access)
+    assert _refused(files.writable_file, ro / "f") == f"{ro / 'f'}: not writable"
+    assert _refused(files.writable_file, ro_file) == f"{ro_file}: not writable"
+    assert files.writable_file(tmp_path / "new.txt") == tmp_path / "new.txt"
 
 
 def test_figures_render_to_the_same_bytes(tmp_path):
@@ -244,6 +315,15 @@ def test_figures_render_to_the_same_bytes(tmp_path):
         png = files.save_figure(fig, tmp_path / "f.png", dpi=50)
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert png.read_bytes() == files.figure_bytes(fig, "png", 50)
-        assert files.save_figure(fig, tmp_path / "f").read_bytes()[:4] == b"\x89PNG"
+        assert _png_size(png.read_bytes()) == (100, 100)  # 2 in at 50 dpi
+        assert _png_size(files.figure_bytes(fig)) == (220, 220)  # 2 in at the default 110 dpi
+        default = files.save_figure(fig, tmp_path / "f")
+        assert _png_size(default.read_bytes()) == (220, 220)
+        assert files.save_figure(fig, tmp_path / "f.svg").read_bytes().lstrip().startswith(b"<?xml")
     finally:
         plt.close(fig)
+
+
+def _png_size(data):
+    """Width and height from a PNG's IHDR chunk (bytes 16-24, big-endian)."""
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")

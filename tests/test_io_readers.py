@@ -50,6 +50,18 @@ def test_table_messages_in_full(tmp_path):
     assert _refused(read_table, tmp_path, ["a"]) == f"{tmp_path}: is a directory, not a CSV file"
     missing = tmp_path / "none.csv"
     assert _refused(read_table, missing, ["a"]) == f"{missing}: no such file"
+    inside_a_file = p / "x.csv"
+    assert _refused(read_table, inside_a_file, ["a"]) == (
+        f"{inside_a_file}: cannot read (Not a directory)")
+    empty = _write(tmp_path, "", "empty.csv")
+    assert _refused(read_table, empty, ["a"]) == (
+        f"{empty}: not a readable CSV file (No columns to parse from file)")
+
+
+def test_table_reads_a_quoted_value_after_the_separator_space(tmp_path):
+    """``a, "x, y"``: the space after the comma is skipped, so the quotes hold the comma."""
+    p = _write(tmp_path, 'a, name\n1, "x, y"\n')
+    assert read_table(p, ["a"], text=["name"])["name"].tolist() == ["x, y"]
 
 
 def test_table_ranges_are_closed_intervals_and_name_the_first_bad_row(tmp_path):
@@ -137,6 +149,19 @@ def test_stabilization_csv_reads_columns_into_the_record(tmp_path):
                                  "[-1e+06, 1e+06]"),
     ({1: {"los_z_px": -2e6}}, 10, "row 3, column 'los_z_px': -2000000.0 is outside "
                                   "[-1e+06, 1e+06]"),
+    # just beyond each end: a limit moved by one unit would accept these
+    ({0: {"t_s": -1000000000.5}}, 10, "row 2, column 't_s': -1000000000.5 is outside "
+                                      "[-1e+09, 1e+09]"),
+    ({9: {"t_s": 1000000000.5}}, 10, "row 11, column 't_s': 1000000000.5 is outside "
+                                     "[-1e+09, 1e+09]"),
+    ({1: {"los_x_px": -1000000.5}}, 10, "row 3, column 'los_x_px': -1000000.5 is outside "
+                                        "[-1e+06, 1e+06]"),
+    ({1: {"los_x_px": 1000000.5}}, 10, "row 3, column 'los_x_px': 1000000.5 is outside "
+                                       "[-1e+06, 1e+06]"),
+    ({1: {"los_z_px": -1000000.5}}, 10, "row 3, column 'los_z_px': -1000000.5 is outside "
+                                        "[-1e+06, 1e+06]"),
+    ({1: {"los_z_px": 1000000.5}}, 10, "row 3, column 'los_z_px': 1000000.5 is outside "
+                                       "[-1e+06, 1e+06]"),
 ])
 def test_stabilization_csv_refusals_in_full(tmp_path, change, n, needle):
     """Limits: |gyro| <= 100 rad/s, |eta| <= 4 pi = 12.5664 rad, |eps| <= 89 deg = 1.5533 rad
@@ -217,6 +242,13 @@ def test_ground_csv_refusals_in_full(tmp_path):
         p = _write(tmp_path, ",".join(row) + "\n" + ",".join(row.values()) + "\n")
         assert _refused(ground_csv.read_ground_csv, p, cam) == (
             f"{p}: row 2, column '{column}': {value} is outside {limit}")
+    p = _write(tmp_path, "target,x_m,y_m,z_m,px,pz\nT1,1,100,2,0,0\n ,1,9,2,0,0\n")
+    assert _refused(ground_csv.read_ground_csv, p, cam) == (
+        f"{p}: row 3, column 'target': empty value")
+    for value in ("-1000000000.5", "1000000000.5"):
+        p = _write(tmp_path, f"target,x_m,y_m,z_m,px,pz,t_s\nT1,1,100,2,0,0,{value}\n")
+        assert _refused(ground_csv.read_ground_csv, p, cam) == (
+            f"{p}: row 2, column 't_s': {value} is outside [-1e+09, 1e+09]")
     # the detector's edges themselves are on it: |px| = 320, |pz| = 240
     p = _write(tmp_path, "target,x_m,y_m,z_m,px,pz\nT1,1,100,2,-320,240\n")
     assert ground_csv.read_ground_csv(p, cam).pixels.tolist() == [[-320.0, 240.0]]
@@ -241,6 +273,11 @@ def test_ground_layout_json_and_the_written_file_by_hand(tmp_path):
     assert bare.positions.dtype == np.float64 and bare.pixels.shape == (2, 2)
     plain = ground_csv.GroundData(("A",), np.array([[1.0, 2.0, 3.0]]), np.array([[0.5, 1.0]]))
     assert plain.layout() == {"target": ["A"], "x_m": [1.0], "y_m": [2.0], "z_m": [3.0]}
+    back = ground_csv.GroundData.from_layout(json.dumps(plain.layout()))
+    assert back.t is None and back.session is None
+    whole = ground_csv.GroundData.from_layout(json.dumps({"x_m": [1], "y_m": [3], "z_m": [5],
+                                                          "t_s": [7]}))
+    assert whole.t.dtype == np.float64 and whole.t.tolist() == [7.0]
     p = tmp_path / "g.csv"
     ground_csv.write_ground_csv(p, d)
     assert p.read_text() == ("target,x_m,y_m,z_m,px,pz,t_s,session\n"
@@ -313,8 +350,14 @@ def test_reference_rows_are_located_for_the_procedure(tmp_path):
     d = collimation_csv.read_mirror_csv(p, min_mirrors=3, sets=sets)
     proc = collimation_csv.procedure_data(d)
     assert (proc.center, proc.roll_mirror) == (2, 1)
-    np.testing.assert_allclose(proc.ins_az, np.radians([3.0] * 3), rtol=1e-15)
+    np.testing.assert_allclose(proc.theodolite_az, np.radians([1.0] * 3), rtol=1e-15)
     np.testing.assert_allclose(proc.theodolite_el, np.radians([2.0] * 3), rtol=1e-15)
+    np.testing.assert_allclose(proc.ins_az, np.radians([3.0] * 3), rtol=1e-15)
+    np.testing.assert_allclose(proc.ins_el, np.radians([4.0] * 3), rtol=1e-15)
+    assert proc.ins_roll is None
+    p = _write(tmp_path, MIRROR_HEAD + ",ins_roll_deg\nA1,azimuth,1,2,3,4,90\n")
+    proc = collimation_csv.procedure_data(collimation_csv.read_mirror_csv(p))
+    np.testing.assert_allclose(proc.ins_roll, [np.pi / 2], rtol=1e-15)
     p = _write(tmp_path, MIRROR_HEAD + "\nA1,azimuth,1,2,3,4\n")
     proc = collimation_csv.procedure_data(collimation_csv.read_mirror_csv(p))
     assert proc.center is None and proc.roll_mirror is None
@@ -331,6 +374,12 @@ def test_mirror_layout_json_and_the_written_file_by_hand(tmp_path):
     np.testing.assert_allclose(lay["ins_roll"], np.radians([0.5, -0.5]), rtol=1e-15)
     back = collimation_csv.MirrorData.from_layout(json.dumps(lay))
     assert back.mirror == ("A", "P") and back.sets == ("azimuth", "pitch")
+    np.testing.assert_allclose(back.theodolite_az, np.radians([10.0, 20.0]), rtol=1e-15)
+    whole = collimation_csv.MirrorData.from_layout(json.dumps(
+        {"mirror": ["A"], "set": ["azimuth"], "theodolite_az": [1], "theodolite_el": [0],
+         "ins_roll": [0]}))
+    assert all(a.dtype == np.float64 for a in (whole.theodolite_az, whole.theodolite_el,
+                                                 whole.ins_az, whole.ins_el, whole.ins_roll))
     assert back.ins_az.tolist() == [0.0, 0.0] and back.ins_el.tolist() == [0.0, 0.0]
     np.testing.assert_allclose(back.theodolite_el, np.radians([0.0, 5.0]), rtol=1e-15)
     np.testing.assert_allclose(back.ins_roll, np.radians([0.5, -0.5]), rtol=1e-15)
@@ -387,6 +436,9 @@ def test_camera_csv_refusals_in_full(tmp_path):
     bad = _write(tmp_path, MODEL.replace("p3,0,20,mm", "p3,0,20,cm"), "bad.csv")
     assert _refused(camera_csv.read_model_csv, bad) == (
         f"{bad}: row 4, column 'unit': 'cm' differs from the first row's 'mm' (one unit per file)")
+    bad = _write(tmp_path, MODEL.replace("p1,0,0,mm", "p1,0,0,cm"), "bad.csv")
+    assert _refused(camera_csv.read_model_csv, bad) == (
+        f"{bad}: row 3, column 'unit': 'mm' differs from the first row's 'cm' (one unit per file)")
     bad = _write(tmp_path, MODEL + "p2,1,1,mm\n", "bad.csv")
     assert _refused(camera_csv.read_model_csv, bad) == (
         f"{bad}: row 6, column 'id': 'p2' repeats row 3")
@@ -413,6 +465,12 @@ def test_camera_csv_refusals_in_full(tmp_path):
     v = _write(tmp_path, _views(3).replace("V1,p1,101,200", "V1,p1,101,-2e6"), "v.csv")
     assert _refused(camera_csv.read_camera_csv, m, v) == (
         f"{v}: row 6, column 'v': -2e6 is outside [-1e+06, 1e+06]")
+    for column, value in (("u", "-1000000.5"), ("u", "1000000.5"), ("v", "-1000000.5"),
+                          ("v", "1000000.5")):
+        new = f"V1,p1,{value},200" if column == "u" else f"V1,p1,101,{value}"
+        v = _write(tmp_path, _views(3).replace("V1,p1,101,200", new), "v.csv")
+        assert _refused(camera_csv.read_camera_csv, m, v) == (
+            f"{v}: row 6, column '{column}': {value} is outside [-1e+06, 1e+06]")
     v = _write(tmp_path, "view,id,u,v\n", "v.csv")
     assert _refused(camera_csv.read_camera_csv, m, v) == f"{v}: 0 data rows, at least 1 needed"
 
