@@ -321,12 +321,14 @@ class LosModel:
         out = np.empty((*self.shape, 2))
         diff = np.empty((*self.shape, 2, len(sets) - 1))
         estimate_kernels.predicted_pixels(self.h, self.w1, self.w2,
-                                 np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
-                                 np.ascontiguousarray(sets[..., 5:8]),
-                                 first_equal(self.ATTITUDE), *self.trig,
-                                 np.ascontiguousarray(install), np.ascontiguousarray(offsets),
-                                 first_equal(self.camera_columns), np.ascontiguousarray(aims),
-                                 self.k_x, self.k_z, np.asarray(steps, float), out, diff)
+                                          np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
+                                          np.ascontiguousarray(sets[..., 5:8]),
+                                          first_equal(self.ATTITUDE), *self.trig,
+                                          np.ascontiguousarray(install),
+                                          np.ascontiguousarray(offsets),
+                                          first_equal(self.camera_columns),
+                                          np.ascontiguousarray(aims),
+                                          self.k_x, self.k_z, np.asarray(steps, float), out, diff)
         return out, diff
 
     def predict(self, params: ArrayLike, aim_px: ArrayLike) -> FloatArray:
@@ -602,8 +604,8 @@ def estimate(
             rows = flat_batch(rows, batch, (n_t, 2, p))
             transition = estimate_kernels.walk_transition(rows[..., n_par:])
             x, P = estimate_kernels.rls_pass(rows, flat_batch(obs, batch, (n_t, 2)),
-                                    flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
-                                    image_noise**2, forgetting, transition, walk_flat)
+                                             flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
+                                             image_noise**2, forgetting, transition, walk_flat)
             return x.reshape(*batch, p + 2), P.reshape(*batch, p + 2, p + 2)
 
     passes = 0

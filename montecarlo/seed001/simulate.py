@@ -339,8 +339,8 @@ def imu_motion(rocking: Rocking, setup: Setup, delta_g: ArrayLike, gyro_bias: Ar
                reference: bool = False) -> Motion:
     """The noise-free part of :func:`simulate`: the carrier's rocking and the IMU output.
 
-    ``reference``: the literal numpy functions instead of :func:`simulate_kernels.rocking_gyro` (the
-    same results to rounding).
+    ``reference``: the literal numpy functions instead of
+    :func:`simulate_kernels.rocking_gyro` (the same results to rounding).
 
     References
     ----------
@@ -409,8 +409,8 @@ def simulate(
     reference : bool
         Compute the IMU output, integrate the gimbal and turn the target into the camera with
         the literal numpy functions instead of :func:`simulate_kernels.rocking_gyro`,
-        :func:`simulate_kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results to
-        rounding). The compiled image covers the patent mount with the target at the centre at
+        :func:`simulate_kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results
+        to rounding). The compiled image covers the patent mount with the target at the centre at
         ``t = 0``; other set-ups use the numpy camera chain either way.
     motion : Motion or None
         :func:`imu_motion` of the same rocking, ``delta_g``, ``gyro_bias``, setup and
