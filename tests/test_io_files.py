@@ -327,3 +327,30 @@ def test_figures_render_to_the_same_bytes(tmp_path):
 def _png_size(data):
     """Width and height from a PNG's IHDR chunk (bytes 16-24, big-endian)."""
     return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+def test_lock_file_mode_and_a_lock_file_removed_meanwhile(tmp_path, umask_022):
+    """The lock file gets 0o666 & ~0o022 = 0o644; a lock file removed by someone else while
+    held is no error on exit."""
+    out = tmp_path / "out"
+    with OutputLock(out) as lock:
+        assert _mode(lock.file) == 0o644
+        lock.file.unlink()
+    assert lock.fd is None
+
+
+def test_staging_details_on_failure_and_before_the_first_result(tmp_path):
+    """An absent path has no previous result; a body that removed its own staging directory
+    before failing still fails with its own error; a stale entry that is a file (not a
+    directory) is left alone without an error."""
+    out = tmp_path / "out"
+    d = OutputDir(out, "run")
+    d.check()
+    assert d.previous is None
+    with pytest.raises(KeyError), OutputDir(out, "run") as staging:
+        staging.rmdir()
+        raise KeyError("stop")
+    dead = 2**22 + 12345
+    (tmp_path / f".out.tmp-{dead}-file").write_text("")
+    OutputDir(out, "run")._remove_stale()
+    assert (tmp_path / f".out.tmp-{dead}-file").exists()
