@@ -169,6 +169,9 @@ def test_problem_start_candidates_and_view():
     patent = ste.stabilization_problem(run_p, setup_p.camera, 0.1)
     assert [c.name for c in patent.candidates] == [c.name for c in ste.CANDIDATES]
     assert patent.unavailable == {}
+    # by default no gyro noise: the whitening divides by the image noise
+    raw = ste.raw_residuals(run_p, setup_p.camera, patent.start, "patent", "point")
+    np.testing.assert_allclose(patent.residuals(patent.start), (raw / 0.1).ravel(), rtol=1e-12)
     view = ste.report_view(run, setup.camera, "inner-gimbal", "point")
     assert (view.system, view.rms_unit, view.rms_scale, view.components) == (
         "stabilization", "px", 1.0, ("x", "z"))
@@ -177,8 +180,15 @@ def test_problem_start_candidates_and_view():
     assert label == "time [s]" and values is run.t and components is None
     np.testing.assert_array_equal(view.raw_residuals(problem.start), ste.raw_residuals(
         run, setup.camera, problem.start, "inner-gimbal", "point"))
-    with pytest.raises(NotImplementedError, match="no Monte Carlo of stabilisation diagnoses"):
+    with pytest.raises(NotImplementedError) as info:
         view.study_params(None)
+    assert str(info.value) == "no Monte Carlo of stabilisation diagnoses"
+    # the raw residuals use the recording's mount and sampling
+    for sampling in ("point", "interval-mean"):
+        np.testing.assert_array_equal(
+            ste.raw_residuals(run, setup.camera, problem.start, "inner-gimbal", sampling),
+            run.los_px - ste.predict_image(problem.start, run, setup.camera, "inner-gimbal",
+                                           sampling))
 
 
 def test_predict_image_of_a_scale_factor_and_a_lag_by_hand():
@@ -221,3 +231,4 @@ def test_convention_check_refits_with_the_recordings_mount_sampling_and_noise():
     assert "los_z_px" in check["named"]
     fit = check["fits"]["los_z_px"]
     assert fit["p_value"] >= 0.01 and fit["large_angles"] == {}
+    assert sorted(fit) == ["chi2_red", "large_angles", "p_value"] and fit["chi2_red"] < 2.0
