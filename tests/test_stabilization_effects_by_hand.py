@@ -232,3 +232,6 @@ def test_convention_check_refits_with_the_recordings_mount_sampling_and_noise():
     fit = check["fits"]["los_z_px"]
     assert fit["p_value"] >= 0.01 and fit["large_angles"] == {}
     assert sorted(fit) == ["chi2_red", "large_angles", "p_value"] and fit["chi2_red"] < 2.0
+    for column in check["named"]:  # named: the refit passes the test AND has small angles
+        assert check["fits"][column]["p_value"] >= 0.01
+        assert not check["fits"][column]["large_angles"]
