@@ -117,3 +117,20 @@ def test_observability_sigma_is_the_cramer_rao_bound(mount):
     if mount == "patent":  # equal changes of dpz and dgz, the largest component made positive
         np.testing.assert_allclose(obs.raw_null_space, [[0, 1, 0, 0, 1] / np.sqrt(2)],
                                    atol=1e-9)
+
+
+def test_drift_rows_take_the_batch_from_whichever_input_has_it():
+    """A batch of two in the gyro output only, in eta only, or in eps only: the compiled rows
+    broadcast the others and equal the numpy path's, run by run."""
+    rock = kin.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
+    setup = sim.Setup(duration=2.0, rate=25.0, aim_azimuth=20 * D, aim_pitch=10 * D)
+    run = sim.simulate(rock, setup, [0.01, -0.02, 0.0], [0.0, 0.01, 0.02])
+    inputs = {"gyro": run.gyro, "eta": run.eta, "eps": run.eps}
+    for name in inputs:
+        batched = dict(inputs, **{name: np.stack([inputs[name], 1.01 * inputs[name]])})
+        got = lin.drift_matrix(run.t, batched["gyro"], batched["eta"], batched["eps"],
+                               setup.camera)
+        ref = lin.drift_matrix(run.t, batched["gyro"], batched["eta"], batched["eps"],
+                               setup.camera, reference=True)
+        assert got.shape == (2, run.t.size, 2, 7)
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())

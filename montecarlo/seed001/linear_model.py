@@ -240,7 +240,8 @@ def drift_matrix(
                                            flat_batch(eps, batch, (t.size,)), float(k_x),
                                            float(k_z)).reshape(*batch, t.size, 2, 7)
     H = rate_matrix(gyro, eta, eps) if rate_matrix else los_rate_matrix(gyro, eta, eps, mount)
-    rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
+    G = bias_rate_matrix(eta, eps)  # without the gyro's batch axes: broadcast to H's
+    rate = np.concatenate([H, np.broadcast_to(G, (*H.shape[:-1], G.shape[-1]))], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
     integrand = np.matmul(plane_rotation(-rho), rate)
     phi = np.matmul(plane_rotation(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))
