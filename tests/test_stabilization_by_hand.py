@@ -3,6 +3,8 @@ transcribed here, hand values of the kinematics at right angles, and the Cramer-
 inverting the whole Fisher matrix (the code projects the other columns out instead).
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -134,3 +136,48 @@ def test_drift_rows_take_the_batch_from_whichever_input_has_it():
                                setup.camera, reference=True)
         assert got.shape == (2, run.t.size, 2, 7)
         np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+
+
+def test_imu_output_without_a_bias_by_default_is_eq1_of_the_body_rate():
+    """Point rows: the IMU output at the sample times is ``C_b^g w_b`` (eq. (1)) of the
+    rocking's closed-form body rate; the half-step samples lie between them."""
+    rock = kin.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
+    setup = sim.Setup(duration=1.0, rate=20.0)
+    delta_g = np.array([0.5, -0.3, 0.7]) * D
+    motion = sim.imu_motion(rock, setup, delta_g)
+    t = setup.times
+    np.testing.assert_allclose(motion.gyro, kin.measured_rate(rock.body_rate(t), delta_g),
+                               rtol=0, atol=1e-15)
+    assert motion.omega_m.shape == (2 * t.size - 1, 3)
+    np.testing.assert_allclose(motion.omega_m[1::2],
+                               kin.measured_rate(rock.body_rate(t[:-1] + 0.025), delta_g),
+                               rtol=0, atol=1e-15)
+
+
+def test_first_interval_mean_row_has_the_stated_noise():
+    """Interval-mean rows: the first row's noise (an interval before the run) has the per-sample
+    sd q sqrt(rate) like the others. 2000 runs x 3 axes: the sample sd is within 4 x its
+    relative sd 1/sqrt(2 x 6000) = 0.9 % of q sqrt(rate)."""
+    rock = kin.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
+    q = np.radians(0.05) / 60.0
+    setup = sim.Setup(duration=0.2, rate=50.0, gyro_noise=q, gyro_sampling="interval-mean",
+                      image_noise=0.0)
+    delta_g = np.zeros((2000, 3))
+    run = sim.simulate(rock, setup, delta_g, 0.0, rng=3)
+    quiet = sim.simulate(rock, dataclasses.replace(setup, gyro_noise=0.0), delta_g, 0.0)
+    noise = (run.gyro - quiet.gyro)[:, 0, :]
+    sd = float(np.sqrt(np.mean(noise**2)))
+    assert abs(sd / (q * np.sqrt(setup.rate)) - 1.0) < 4.0 / np.sqrt(2.0 * noise.size)
+
+
+def test_inner_gimbal_encoder_azimuth_starts_at_the_aim_beyond_half_a_turn():
+    """Aimed at 200 deg, a compensated inner-gimbal camera's encoder azimuth starts near
+    200 deg (the installation angles are a fraction of a degree), not at its -160 deg alias."""
+    rock = kin.Rocking(np.full(3, 5 * D), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
+    setup = sim.Setup(duration=0.5, rate=20.0, aim_azimuth=200 * D, aim_pitch=10 * D,
+                      mount="inner-gimbal", image_noise=0.0)
+    compensation = sim.Compensation([0.005, 0.01, -0.01, 0.0], delta_gz=0.005,
+                                    mount="inner-gimbal")
+    run = sim.simulate(rock, setup, [0.01, -0.01, 0.005], [0.005, 0.01, -0.01],
+                       compensation=compensation)
+    assert abs(run.eta[0] - 200 * D) < 2 * D
