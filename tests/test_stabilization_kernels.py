@@ -15,7 +15,7 @@ from scipy.interpolate import CubicSpline
 
 from montecarlo.geometry.rotations import mounting_matrix
 from montecarlo.seed001 import estimate as se
-from montecarlo.seed001 import kernels
+from montecarlo.seed001 import estimate_kernels, simulate_kernels
 from montecarlo.seed001 import kinematics as kin
 from montecarlo.seed001 import linear_model as lin
 from montecarlo.seed001 import simulate as sim
@@ -108,7 +108,7 @@ def test_rk4_gimbal_equals_integrate_gimbal():
     stages = np.stack([loop[:, 0:-1:2], loop[:, 1::2], loop[:, 2::2]], axis=-2)
     stages = stages + kin.matvec(C[:, None], noise)[:, :-1, None, :]
     expected = sim.integrate_gimbal(t, stages, *start)
-    got = kernels.rk4_gimbal(np.diff(t), rate, noise, C, bias, *start)
+    got = simulate_kernels.rk4_gimbal(np.diff(t), rate, noise, C, bias, *start)
     for a, b in zip(expected, got, strict=True):
         np.testing.assert_allclose(b, a, rtol=0, atol=t.size * EPS)
 
@@ -119,7 +119,7 @@ def test_spline_at_equals_scipy_cubic_spline():
         y = RNG.normal(0, 0.1, (2, t.size, 3)).cumsum(axis=1)
         g1, g2 = se.gauss_points(t)
         spline = CubicSpline(t, y, axis=1)
-        for got, g in zip(kernels.spline_at(t, y, g1, g2), (g1, g2), strict=True):
+        for got, g in zip(estimate_kernels.spline_at(t, y, g1, g2), (g1, g2), strict=True):
             np.testing.assert_allclose(got, np.moveaxis(spline(g), 0, -1), rtol=0,
                                        atol=1e-12 * np.abs(y).max())
 
@@ -151,7 +151,7 @@ def test_predicted_pixels_with_long_steps_equal_predict_los():
     w1, w2 = spline(g1), spline(g2)
     angle = np.linalg.norm(0.5 * h * (w1 + w2) + np.sqrt(3.0) / 12.0 * h**2 * np.cross(w1, w2),
                            axis=-1)
-    long_step = angle**2 >= kernels.SERIES_ANGLE_SQ
+    long_step = angle**2 >= estimate_kernels.SERIES_ANGLE_SQ
     assert np.mean(np.any(long_step, axis=0) & ~np.all(long_step, axis=0)) > 0.5  # mixed
     model = _model(setup, run)
     bound = run.t.size * EPS * float(SETUP.camera.k_x)
@@ -236,8 +236,9 @@ def test_rls_pass_equals_recursive_least_squares(forgetting):
     Q = RNG.uniform(0, 1e-3, (N_RUNS, n, 2))
     x, P = se.recursive_least_squares(rows, obs, mean0, cov0, 0.01, forgetting=forgetting,
                                       walk_transition=F, walk_var=Q)
-    xk, Pk = kernels.rls_pass(rows, obs, mean0, np.broadcast_to(cov0, (N_RUNS, p + 2, p + 2)),
-                              0.01, forgetting, F, Q)
+    xk, Pk = estimate_kernels.rls_pass(rows, obs, mean0,
+                                       np.broadcast_to(cov0, (N_RUNS, p + 2, p + 2)),
+                                       0.01, forgetting, F, Q)
     scale = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1))
     np.testing.assert_allclose(xk / scale, x / scale, rtol=0, atol=1e-10)
     np.testing.assert_allclose(Pk / (scale[..., :, None] * scale[..., None, :]),
@@ -250,7 +251,7 @@ def test_walk_transition_equals_the_numpy_turn():
     n = 300
     J = RNG.normal(0, 1, (N_RUNS, n, 2, 2)) + 3 * np.eye(2)
     expected = J @ np.linalg.inv(np.concatenate([J[:, :1], J[:, :-1]], axis=1))
-    got = kernels.walk_transition(J)
+    got = estimate_kernels.walk_transition(J)
     np.testing.assert_allclose(got[:, 0], np.broadcast_to(np.eye(2), (N_RUNS, 2, 2)), rtol=0,
                                atol=4 * EPS)
     cond = np.linalg.cond(np.concatenate([J[:, :1], J[:, :-1]], axis=1))

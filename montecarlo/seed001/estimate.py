@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
-from montecarlo.seed001 import kernels
+from montecarlo.seed001 import estimate_kernels
 from montecarlo.seed001.kinematics import (
     camera_matrix,
     check_mount,
@@ -261,11 +261,11 @@ class LosModel:
 
     The gyro output is splined once (:func:`rate_spline` is linear, so the rate of any
     parameters is the same affine map of the splined gyro output, applied by
-    :func:`kernels.predicted_pixels`; :func:`kernels.spline_at` for point samples, scipy for
-    interval means) and the cosines and sines of the gimbal angles are taken once, both with
-    the runs last (the kernel's layout). The prediction and the forward differences of the
-    Jacobian are one kernel call; sets that share the base's attitude or camera share their
-    computation.
+    :func:`estimate_kernels.predicted_pixels`; :func:`estimate_kernels.spline_at` for point
+    samples, scipy for interval means) and the cosines and sines of the gimbal angles are taken
+    once, both with the runs last (the kernel's layout). The prediction and the forward
+    differences of the Jacobian are one kernel call; sets that share the base's attitude or
+    camera share their computation.
 
     Parameters
     ----------
@@ -286,7 +286,7 @@ class LosModel:
         gyro = np.ascontiguousarray(gyro, float)
         self.h = np.diff(t)
         if check_sampling(gyro_sampling) == "point" and t.size >= 4:
-            self.w1, self.w2 = kernels.spline_at(t, gyro, *gauss_points(t))
+            self.w1, self.w2 = estimate_kernels.spline_at(t, gyro, *gauss_points(t))
         else:
             spline = rate_spline(t, gyro, gyro_sampling)
             self.w1, self.w2 = (np.ascontiguousarray(np.moveaxis(spline(g), 0, -1))
@@ -320,13 +320,15 @@ class LosModel:
 
         out = np.empty((*self.shape, 2))
         diff = np.empty((*self.shape, 2, len(sets) - 1))
-        kernels.predicted_pixels(self.h, self.w1, self.w2,
-                                 np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
-                                 np.ascontiguousarray(sets[..., 5:8]),
-                                 first_equal(self.ATTITUDE), *self.trig,
-                                 np.ascontiguousarray(install), np.ascontiguousarray(offsets),
-                                 first_equal(self.camera_columns), np.ascontiguousarray(aims),
-                                 self.k_x, self.k_z, np.asarray(steps, float), out, diff)
+        estimate_kernels.predicted_pixels(self.h, self.w1, self.w2,
+                                          np.ascontiguousarray(np.swapaxes(C_bg, -1, -2)),
+                                          np.ascontiguousarray(sets[..., 5:8]),
+                                          first_equal(self.ATTITUDE), *self.trig,
+                                          np.ascontiguousarray(install),
+                                          np.ascontiguousarray(offsets),
+                                          first_equal(self.camera_columns),
+                                          np.ascontiguousarray(aims),
+                                          self.k_x, self.k_z, np.asarray(steps, float), out, diff)
         return out, diff
 
     def predict(self, params: ArrayLike, aim_px: ArrayLike) -> FloatArray:
@@ -532,7 +534,7 @@ def estimate(
     reference : bool
         Run the literal numpy functions (:func:`predict_los`, :func:`los_jacobian`,
         :func:`recursive_least_squares`) instead of :class:`LosModel` and
-        :func:`kernels.rls_pass` (the same results to rounding, many times slower).
+        :func:`estimate_kernels.rls_pass` (the same results to rounding, many times slower).
 
     Returns
     -------
@@ -600,10 +602,10 @@ def estimate(
         def rls(rows, obs, prior_mean):
             p = rows.shape[-1]
             rows = flat_batch(rows, batch, (n_t, 2, p))
-            transition = kernels.walk_transition(rows[..., n_par:])
-            x, P = kernels.rls_pass(rows, flat_batch(obs, batch, (n_t, 2)),
-                                    flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
-                                    image_noise**2, forgetting, transition, walk_flat)
+            transition = estimate_kernels.walk_transition(rows[..., n_par:])
+            x, P = estimate_kernels.rls_pass(rows, flat_batch(obs, batch, (n_t, 2)),
+                                             flat_batch(prior_mean, batch, (p + 2,)), cov_flat,
+                                             image_noise**2, forgetting, transition, walk_flat)
             return x.reshape(*batch, p + 2), P.reshape(*batch, p + 2, p + 2)
 
     passes = 0

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
 from montecarlo.geometry.camera import Camera
-from montecarlo.seed001 import kernels
+from montecarlo.seed001 import estimate_kernels
 from montecarlo.seed001.kinematics import as_vector, check_mount, flat_batch, stack_vector
 from montecarlo.seed001.simulate import Record
 
@@ -221,8 +221,8 @@ def drift_matrix(
         omitted (:func:`patent_eq6_matrix` to see what the printed model would give).
     mount : {"patent", "inner-gimbal"}
     reference : bool
-        Compute with numpy and scipy instead of :func:`kernels.drift_rows` (same result to
-        rounding; always so with a ``rate_matrix`` or the inner-gimbal mount).
+        Compute with numpy and scipy instead of :func:`estimate_kernels.drift_rows` (same
+        result to rounding; always so with a ``rate_matrix`` or the inner-gimbal mount).
 
     Returns
     -------
@@ -235,12 +235,13 @@ def drift_matrix(
     k_x, k_z = np.asarray(camera.k_x, float), np.asarray(camera.k_z, float)
     if not reference and rate_matrix is None and check_mount(mount) == "patent":
         batch = np.broadcast_shapes(gyro.shape[:-2], eta.shape[:-1], eps.shape[:-1])
-        return kernels.drift_rows(t, flat_batch(gyro, batch, (t.size, 3)),
-                                  flat_batch(eta, batch, (t.size,)),
-                                  flat_batch(eps, batch, (t.size,)), float(k_x),
-                                  float(k_z)).reshape(*batch, t.size, 2, 7)
+        return estimate_kernels.drift_rows(t, flat_batch(gyro, batch, (t.size, 3)),
+                                           flat_batch(eta, batch, (t.size,)),
+                                           flat_batch(eps, batch, (t.size,)), float(k_x),
+                                           float(k_z)).reshape(*batch, t.size, 2, 7)
     H = rate_matrix(gyro, eta, eps) if rate_matrix else los_rate_matrix(gyro, eta, eps, mount)
-    rate = np.concatenate([H, bias_rate_matrix(eta, eps)], -1)
+    G = bias_rate_matrix(eta, eps)  # without the gyro's batch axes: broadcast to H's
+    rate = np.concatenate([H, np.broadcast_to(G, (*H.shape[:-1], G.shape[-1]))], -1)
     rho = cumulative_trapezoid(image_roll_rate(gyro, eta, eps), t, axis=-1, initial=0.0)
     integrand = np.matmul(plane_rotation(-rho), rate)
     phi = np.matmul(plane_rotation(rho), cumulative_trapezoid(integrand, t, axis=-3, initial=0.0))

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from montecarlo.geometry.camera import Camera, pixels_from_direction
 from montecarlo.geometry.rotations import mounting_matrix
-from montecarlo.seed001 import kernels
+from montecarlo.seed001 import simulate_kernels
 from montecarlo.seed001.kinematics import (
     Rocking,
     as_vector,
@@ -306,8 +306,8 @@ def target_view_compiled(
         camera[2 * i], camera[2 * i + 1] = np.cos(a), np.sin(a)
     carrier = np.broadcast_to(carrier, (6, *shape)).reshape(6, -1, shape[-1])
     u = np.empty((*carrier.shape[1:], 3))
-    kernels.target_directions(np.ascontiguousarray(carrier), camera.reshape(6, -1, shape[-1]),
-                              u)  # seed 001, eq. (2)
+    simulate_kernels.target_directions(np.ascontiguousarray(carrier),
+                                       camera.reshape(6, -1, shape[-1]), u)  # seed 001, eq. (2)
     return u.reshape(*shape, 3)
 
 
@@ -339,8 +339,8 @@ def imu_motion(rocking: Rocking, setup: Setup, delta_g: ArrayLike, gyro_bias: Ar
                reference: bool = False) -> Motion:
     """The noise-free part of :func:`simulate`: the carrier's rocking and the IMU output.
 
-    ``reference``: the literal numpy functions instead of :func:`kernels.rocking_gyro` (the
-    same results to rounding).
+    ``reference``: the literal numpy functions instead of
+    :func:`simulate_kernels.rocking_gyro` (the same results to rounding).
 
     References
     ----------
@@ -362,7 +362,7 @@ def imu_motion(rocking: Rocking, setup: Setup, delta_g: ArrayLike, gyro_bias: Ar
                                 (rocking.phase, (3,)), (imu_matrix(delta_g), (3, 3)),
                                 (bias, (3,)))]
         rock_angles, omega_m = (a.reshape(*batch, t_half.size, 3)
-                                for a in kernels.rocking_gyro(t_half, *flat))  # eq. (1)
+                                for a in simulate_kernels.rocking_gyro(t_half, *flat))  # eq. (1)
         if setup.mount == "patent" and not np.any(setup.target_px):  # as simulate's image
             carrier = carrier_trig(rock_angles[..., 0::2, :])
     if setup.gyro_sampling == "point":
@@ -408,9 +408,9 @@ def simulate(
         Corrections applied by the stabilisation loop (None: none).
     reference : bool
         Compute the IMU output, integrate the gimbal and turn the target into the camera with
-        the literal numpy functions instead of :func:`kernels.rocking_gyro`,
-        :func:`kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results to
-        rounding). The compiled image covers the patent mount with the target at the centre at
+        the literal numpy functions instead of :func:`simulate_kernels.rocking_gyro`,
+        :func:`simulate_kernels.rk4_gimbal` and :func:`target_view_compiled` (the same results
+        to rounding). The compiled image covers the patent mount with the target at the centre at
         ``t = 0``; other set-ups use the numpy camera chain either way.
     motion : Motion or None
         :func:`imu_motion` of the same rocking, ``delta_g``, ``gyro_bias``, setup and
@@ -468,7 +468,7 @@ def simulate(
                                 (C_gb, (3, 3)), (loop_bias, (3,)), (start[0], ()),
                                 (start[1], ()), (start[2], ()), (start[3], ()))]
         eta, eps = (a.reshape(*batch, t.size)
-                    for a in kernels.rk4_gimbal(np.diff(t), *flat))  # seed 001, eq. (4)
+                    for a in simulate_kernels.rk4_gimbal(np.diff(t), *flat))  # seed 001, eq. (4)
     if inner:
         eta, eps = encoder_angles(eta, eps, angles, dgz, setup.aim_azimuth)
 

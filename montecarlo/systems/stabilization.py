@@ -93,7 +93,9 @@ def run_trials(
         Number of trials.
     reference : bool
         Simulate and estimate with the literal numpy functions instead of the compiled kernels
-        of :mod:`montecarlo.seed001.kernels` (the same results to rounding, many times slower).
+        of :mod:`montecarlo.seed001.simulate_kernels` and
+        :mod:`montecarlo.seed001.estimate_kernels` (the same results to rounding, many times
+        slower).
 
     Returns
     -------

@@ -14,8 +14,9 @@ reference (one block at a time, with streaming statistics), (c) the fused kernel
 Seed 001 stabilisation beside them: trials of the base point of ``studies/stabilization.toml``
 (simulate a 60 s run at 100 Hz, estimate by RLS, rerun compensated) through the runner on two
 cores, (e) with the literal numpy functions (``reference=True``), (f) with the compiled
-kernels of :mod:`montecarlo.seed001.kernels`; timed in alternation, median of
-``min(repeats, 3)`` runs each.
+kernels of :mod:`montecarlo.seed001.simulate_kernels` and
+:mod:`montecarlo.seed001.estimate_kernels`; timed in alternation, median of ``min(repeats, 3)``
+runs each.
 """
 
 from __future__ import annotations
