@@ -344,6 +344,7 @@ COLLIMATION = ParamSystem(
     ),
     seconds_per_trial=0.05,
     default_block_size=32,
+    limits={"roll_prior": (1e-6, None)},  # positive [deg]: the candidate's range is +-3 times it
 )
 """Study system ``discrepancy_collimation``: residual statistics and DIA rates."""
 
