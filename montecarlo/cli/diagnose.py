@@ -260,8 +260,8 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
                     + ", ".join(f"χ² {o} {v:.4g}" for o, v in c.chi2.items()) + "; "
                     + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"
                     for k, c in choices.items())
-    return _diagnosis_output(args, d, pe.report_view(data, sigma, side), str(args.data), steps,
-                             extra, preface)
+    return _diagnosis_output(args, d, pe.report_view(data, sigma, side, prior), str(args.data),
+                             steps, extra, preface)
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:

@@ -187,7 +187,7 @@ COLLIMATION_DEFAULTS: dict[str, float | int | str] = {
     "fit_effects": "", "diagnose": 0, "expected": "", "inject_mdb": 0.0, "alpha": ALPHA,
     "n_outliers": 0, "outlier_size": 0.0,
     "readings": "absolute", "reference_az": 0.0, "reading_tilt_x": 0.0, "reading_tilt_y": 0.0,
-    "roll_mirror": 1.0,
+    "roll_mirror": 1.0, "ins_roll": "", "roll_prior": pe.ROLL_PRIOR,
 }
 """Defaults of :func:`run_collimation_trials` (SI units, radians); see its docstring."""
 
@@ -220,7 +220,12 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
         parameters, ``reference_az`` [rad] (0) the central mirror's theodolite azimuth of
         relative-reading layouts, ``reading_tilt_x``, ``reading_tilt_y`` [rad] (0) the
         ``reading_model`` candidate, ``roll_mirror`` +1
-        right or -1 left; ``frame_heading`` turns the absolute readings).
+        right or -1 left; ``frame_heading`` turns the absolute readings; ``ins_roll`` [JSON
+        text] ("") the unrecorded rolls, ``{"ins_roll_<pointing>": roll [rad], ...}`` as the
+        ``ins_roll`` candidate names them for ``layout``, added to the simulated readings
+        (with ``ins_roll`` in ``fit_effects``, the fit refits these rolls only, the others
+        held at 0 as a diagnosis holds the ones it found absorbed); ``roll_prior`` [rad] (2
+        deg) that candidate's prior, as ``diagnose collimation --roll-sigma-deg``).
     rng : numpy Generator, the only source of randomness.
     n : number of simulated calibrations.
 
@@ -279,8 +284,13 @@ def _procedure_trials(p: Mapping[str, Any], rng: np.random.Generator, n: int
     noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
     sigma = math.hypot(noise.theodolite, ins)
     truth = {k: float(p[k]) for k in ("axis_az", "axis_el", "reference_az", *pe.TRUTH_KEYS)}
+    rolls = _rolls(str(p["ins_roll"]), layout)
+    truth.update(rolls)
+    prior = float(p["roll_prior"])
     effects = tuple(e.strip() for e in str(p["fit_effects"]).split(",") if e.strip())
-    truth = _inject(lambda tr: pe.exact_problem(layout, tr, sigma, side), truth, p)
+    # a model with ins_roll refits the rolls it was given (a diagnosis fixes the others at 0)
+    kept = tuple(rolls) if rolls and pe.ROLL in effects else None
+    truth = _inject(lambda tr: pe.exact_problem(layout, tr, sigma, side, prior), truth, p)
     count, size = int(p["n_outliers"]), float(p["outlier_size"]) * sigma
     heading = float(p["frame_heading"])
 
@@ -296,11 +306,24 @@ def _procedure_trials(p: Mapping[str, Any], rng: np.random.Generator, n: int
 
     return score_trials(
         lambda g: pe.simulate(layout, truth, noise, g, side, heading),
-        lambda data: pe.procedure_problem(data, sigma, side),
+        lambda data: pe.procedure_problem(data, sigma, side, prior, kept),
         lambda data, fit: float(np.sqrt(np.mean(pe.raw_residuals(data, fit.params, side)
                                                 ** 2))),
         truth, effects, int(p["diagnose"]), str(p["expected"]), float(p["alpha"]), rng, n,
         watched=("reading_model",), spoil=spoil if count else None)
+
+
+def _rolls(text: str, layout: MirrorData) -> dict[str, float]:
+    """The ``ins_roll`` parameter of :func:`run_collimation_trials`: roll name -> value [rad]."""
+    if not text:
+        return {}
+    rolls = json.loads(text)
+    if not isinstance(rolls, dict):
+        raise ValueError(f"ins_roll: a JSON object of roll name -> value, not {text!r}")
+    unknown = set(rolls) - set(pe.roll_parameters(layout))
+    if unknown:
+        raise ValueError(f"ins_roll: not rolls of this layout's pointings: {sorted(unknown)}")
+    return {k: float(v) for k, v in rolls.items()}
 
 
 COLLIMATION = ParamSystem(
@@ -312,7 +335,7 @@ COLLIMATION = ParamSystem(
            "axis_az": "arcsec", "axis_el": "arcsec", "frame_tilt_x": "arcsec",
            "frame_tilt_y": "arcsec", "ins_heading_bias": "arcsec", "ins_pitch_bias": "arcsec",
            "theodolite_c": "arcsec", "reference_az": "deg", "reading_tilt_x": "arcsec",
-           "reading_tilt_y": "arcsec"},
+           "reading_tilt_y": "arcsec", "roll_prior": "deg"},
     metrics_=(
         Metric("chi2", "χ² of the fitted model", "1", 1.0),
         Metric("chi2_red", "reduced χ² of the fitted model", "1", 1.0),
@@ -322,6 +345,7 @@ COLLIMATION = ParamSystem(
     ),
     seconds_per_trial=0.05,
     default_block_size=32,
+    limits={"roll_prior": (1e-6, None)},  # positive [deg]: the candidate's range is +-3 times it
 )
 """Study system ``discrepancy_collimation``: residual statistics and DIA rates."""
 
