@@ -179,3 +179,31 @@ def test_trials_beyond_far_are_the_literal_fit_and_failures_are_nan(monkeypatch)
     assert not f.ok.any()
     assert np.isnan(f.values).all() and np.isnan(f.covariance).all()
     assert np.isnan(f.residuals).all() and np.isnan(f.chi2).all()
+
+
+@pytest.mark.parametrize("reference_rows", [True, False])
+def test_a_left_roll_mirror_and_fitted_rolls_are_fitted_by_the_batch_itself(monkeypatch,
+                                                                           reference_rows):
+    """Roll mirror on the left (side -1), rolls fitted (their prior pseudo-observations in the
+    Jacobian: all 12 with reference rows, the two reference rolls of relative readings): no trial is handed to the literal path (refused here), the offsets are within
+    5 of their sigmas of the truth, and with no reading error (and, for relative readings, a level
+    mount, where the fitted reference rolls' prior costs nothing) the truth is met exactly and
+    the corrected readings meet the theodolite's directions."""
+    monkeypatch.setattr(pr, "fit_procedure", None)
+    d = bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(2 * A, 2 * A, 2 * A, 2 * A,
+                                                       math.radians(1.0)),
+                          np.random.default_rng(8), 3, side=-1.0, frame_heading=0.4,
+                          az_center=0.2, reference_rows=reference_rows)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A, side=-1.0,
+                     free_roll=reference_rows)  # relative readings: the two reference rolls
+    assert f.ok.all()
+    sigma = np.sqrt(np.diagonal(f.covariance, axis1=1, axis2=2)[:, :2])
+    assert (np.abs(f.values[:, :2] - [GAMMA, LAMBDA]) < 5 * sigma).all()
+    mount = math.radians(1.0) if reference_rows else 0.0  # else the roll prior pulls
+    d = bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(0, 0, 0, 0, mount),
+                          np.random.default_rng(8), 2, side=-1.0, frame_heading=0.4,
+                          az_center=0.2, reference_rows=reference_rows)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A, side=-1.0)
+    assert f.ok.all()
+    np.testing.assert_allclose(f.values[:, :2], [[GAMMA, LAMBDA]] * 2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(bf.consistency_angles(d, f, side=-1.0), 0.0, atol=1e-12)
