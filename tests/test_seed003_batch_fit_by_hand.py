@@ -126,6 +126,7 @@ def test_grouped_differences_are_the_column_by_column_ones(kw):
     """The Jacobian over every parameter (and over the core ones alone) and the residual
     covariance G diag(s^2) G' of the grouped differences equal central differences taken one
     column at a time here (step 1e-6 as the model's), at a point off the solution."""
+    kw = dict(kw)  # not the parameter itself: a test run again must see free_roll again
     free_roll = kw.pop("free_roll", False)
     d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=2, **kw)
     b = bf._Batch(d, 1.0, free_roll, math.radians(2.0))
@@ -185,10 +186,11 @@ def test_trials_beyond_far_are_the_literal_fit_and_failures_are_nan(monkeypatch)
 def test_a_left_roll_mirror_and_fitted_rolls_are_fitted_by_the_batch_itself(monkeypatch,
                                                                            reference_rows):
     """Roll mirror on the left (side -1), rolls fitted (their prior pseudo-observations in the
-    Jacobian: all 12 with reference rows, the two reference rolls of relative readings): no trial is handed to the literal path (refused here), the offsets are within
-    5 of their sigmas of the truth, and with no reading error (and, for relative readings, a level
-    mount, where the fitted reference rolls' prior costs nothing) the truth is met exactly and
-    the corrected readings meet the theodolite's directions."""
+    Jacobian: all 12 with reference rows, the two reference rolls of relative readings): no
+    trial is handed to the literal path (refused here), the offsets are within 5 of their
+    sigmas of the truth, and with no reading error (and, for relative readings, a level mount,
+    where the fitted reference rolls' prior costs nothing) the truth is met exactly and the
+    corrected readings meet the theodolite's directions."""
     monkeypatch.setattr(pr, "fit_procedure", None)
     d = bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(2 * A, 2 * A, 2 * A, 2 * A,
                                                        math.radians(1.0)),
