@@ -157,6 +157,7 @@ def test_trials_beyond_far_are_the_literal_fit_and_failures_are_nan(monkeypatch)
     d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=2)
     monkeypatch.setattr(bf, "FAR", 0.0)
     f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=3 * A, side=1.0)
+    assert f.ok.all()
     for i in range(2):
         lit = pr.fit_procedure(d.trial(i), sigma_ins=2 * A, sigma_theodolite=3 * A,
                                before=False)
