@@ -210,3 +210,23 @@ def test_a_left_roll_mirror_and_fitted_rolls_are_fitted_by_the_batch_itself(monk
     assert f.ok.all()
     np.testing.assert_allclose(f.values[:, :2], [[GAMMA, LAMBDA]] * 2, rtol=0, atol=1e-12)
     np.testing.assert_allclose(bf.consistency_angles(d, f, side=-1.0), 0.0, atol=1e-12)
+
+
+def test_defaults_are_a_central_mirror_at_zero_and_no_frame_heading():
+    """No offsets, no error, defaults: the theodolite reads the central mirror at azimuth 0 and
+    the roll mirror at +90 deg (side +1), both level, rows 0 and 1; the INS reads the same
+    headings (frame heading 0) and pitches."""
+    d = bf.simulate_block(0.0, 0.0, AZ, EL, Noise(0, 0, 0, 0, 0.0), np.random.default_rng(2), 2)
+    assert (d.center, d.roll_mirror) == (0, 1)
+    np.testing.assert_allclose(d.theodolite_az[:, :2], [[0.0, math.pi / 2]] * 2, atol=1e-15)
+    np.testing.assert_allclose(d.theodolite_el[:, :2], 0.0, atol=1e-15)
+    np.testing.assert_allclose(d.ins_az, d.theodolite_az, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.ins_el, d.theodolite_el, rtol=0, atol=1e-12)
+
+
+def test_one_degree_of_freedom_is_enough():
+    """Relative readings of two mirrors, no roll read: 4 readings, 3 parameters, dof 1."""
+    d = bf.simulate_block(GAMMA, LAMBDA, [0.3, 0.0], [0.0, 0.3], Noise(A, A, A, A, 0.0),
+                          np.random.default_rng(1), 2, reference_rows=False, with_roll=False)
+    f = bf.fit_block(d, sigma_ins=A, sigma_theodolite=A)
+    assert f.dof == 1 and f.values.shape == (2, 3)
