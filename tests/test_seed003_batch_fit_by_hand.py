@@ -1,0 +1,232 @@
+"""Seed 003's batched procedure fit against independent references: noise-free truths, degrees of
+freedom counted by hand, column-by-column central differences, scipy's Levenberg-Marquardt and
+numpy's matrix inverse, and the literal fit where the batch hands a trial over to it."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from montecarlo.seed003 import batch_fit as bf
+from montecarlo.seed003 import procedure as pr
+from montecarlo.seed003.model import Noise
+
+A = math.radians(1.0 / 3600.0)  # one arc-second [rad]
+AZ, EL, _ = pr.procedure_layout()  # 5 azimuth + 5 pitch mirrors: m = 10
+GAMMA, LAMBDA = 200 * A, -300 * A
+
+
+def _block(noise: Noise, n: int = 3, seed: int = 3, **kw) -> bf.BatchData:
+    return bf.simulate_block(GAMMA, LAMBDA, AZ, EL, noise, np.random.default_rng(seed), n,
+                             frame_heading=0.4, az_center=0.2, **kw)
+
+
+def test_noise_free_readings_give_the_offsets_back_exactly():
+    """Reference rows, rolls recorded, no reading error (mount rolls of 1 deg): the fit is the
+    truth (to 1e-12 rad), chi2 = 0, dof = 2m - p = 20 - 2 = 18, the rolls used are the recorded
+    ones and the corrected readings meet the theodolite's directions (angle 0)."""
+    d = _block(Noise(0, 0, 0, 0, math.radians(1.0)))
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
+    assert f.names == ("axis_az", "axis_el") and f.dof == 18 and f.roll_recorded
+    assert f.ok.all()
+    np.testing.assert_allclose(f.values, [[GAMMA, LAMBDA]] * 3, rtol=0, atol=1e-12)
+    assert (f.chi2 < 1e-12).all()
+    np.testing.assert_allclose(f.residuals, 0.0, atol=1e-12)
+    assert f.residuals.shape == (3, 20) and f.covariance.shape == (3, 2, 2)
+    np.testing.assert_array_equal(f.rolls, d.ins_roll)
+    np.testing.assert_allclose(bf.consistency_angles(d, f), 0.0, atol=1e-12)
+
+
+def test_level_mount_without_roll_readings_uses_zero_rolls():
+    """No roll read, level mount, no error: the truth again, rolls taken as 0 at all 12 rows."""
+    d = _block(Noise(0, 0, 0, 0, 0.0), with_roll=False)
+    f = bf.fit_block(d, sigma_ins=3 * A, sigma_theodolite=1 * A)
+    assert not f.roll_recorded and f.dof == 18
+    np.testing.assert_allclose(f.values, [[GAMMA, LAMBDA]] * 3, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(f.rolls, np.zeros((3, 12)))
+    np.testing.assert_allclose(bf.consistency_angles(d, f), 0.0, atol=1e-12)
+    d = _block(Noise(0, 0, 0, 0, 0.0), with_roll=False, reference_rows=False)
+    f = bf.fit_block(d, sigma_ins=3 * A, sigma_theodolite=1 * A)
+    assert f.names == ("axis_az", "axis_el", "reference_az") and f.dof == 17  # 20 - 3
+    np.testing.assert_allclose(f.values[:, :2], [[GAMMA, LAMBDA]] * 3, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f.values[:, 2], 0.2, rtol=0, atol=1e-12)  # the central azimuth
+    np.testing.assert_array_equal(f.rolls, np.zeros((3, 12)))  # 10 mirrors + 2 references
+    np.testing.assert_allclose(bf.consistency_angles(d, f), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("reference_rows", [True, False])
+def test_where_the_rolls_come_from_and_the_degrees_of_freedom(reference_rows):
+    """Free rolls: one per pointing (12), each with a prior pseudo-observation, so dof = 2m +
+    12 - (2 + 12) = 18 with reference rows, 20 + 12 - 15 = 17 without; the rolls are the fitted
+    ones. Relative readings with the roll read: the two reference rolls are fitted with their
+    prior, dof = 20 + 2 - 5 = 17, the rolls are the 10 recorded then the 2 fitted ones."""
+    d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=2,
+               reference_rows=reference_rows)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A, free_roll=True)
+    core = 2 if reference_rows else 3
+    assert f.names[core:] == tuple(f"roll_{i}" for i in range(12))
+    assert f.dof == (18 if reference_rows else 17) and not f.roll_recorded and f.ok.all()
+    np.testing.assert_array_equal(f.rolls, f.values[:, core:])
+    if not reference_rows:
+        f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
+        assert f.names[3:] == ("roll_center", "roll_mirror") and f.dof == 17
+        assert f.roll_recorded
+        np.testing.assert_array_equal(f.rolls, np.concatenate([d.ins_roll, f.values[:, 3:]], 1))
+
+
+def test_too_few_readings_are_refused_with_their_counts():
+    d = bf.simulate_block(GAMMA, LAMBDA, [0.3], [0.0], Noise(A, A, A, A), np.random.default_rng(1),
+                          2, reference_rows=False)
+    with pytest.raises(pr.NotDetermined, match="1 measured mirrors give 2 readings; 3 parameters"):
+        bf.fit_block(d, sigma_ins=A, sigma_theodolite=A)
+
+
+def test_inverse_spd_is_numpys_inverse_and_refuses_an_indefinite_matrix():
+    rng = np.random.default_rng(0)
+    M = rng.standard_normal((4, 3, 3))
+    S = M @ np.swapaxes(M, 1, 2) + 0.1 * np.eye(3)
+    np.testing.assert_allclose(bf._inverse_spd(S), np.linalg.inv(S), rtol=1e-10, atol=1e-12)
+    with pytest.raises(np.linalg.LinAlgError):
+        bf._inverse_spd(np.diag([1.0, -1.0])[None])
+
+
+def test_levenberg_marquardt_reaches_scipys_minimum_trial_by_trial():
+    """y = a exp(b t) + noise, five trials with their own data and starts: each trial's solution
+    is scipy's MINPACK one (1e-7 relative), and a linear problem's is its normal equations."""
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 1.0, 9)
+    truth = np.column_stack([rng.uniform(1, 3, 5), rng.uniform(-2, 2, 5)])
+    y = truth[:, :1] * np.exp(truth[:, 1:] * t) + 0.05 * rng.standard_normal((5, t.size))
+
+    def fun(x, idx):
+        return x[:, :1] * np.exp(x[:, 1:] * t) - y[idx]
+
+    def jac(x, idx):
+        e = np.exp(x[:, 1:] * t)
+        return np.stack([e, x[:, :1] * t * e], axis=-1)
+
+    x0 = np.column_stack([np.ones(5), np.linspace(-1, 1, 5)])
+    got = bf._levenberg_marquardt(fun, jac, x0)
+    for i in range(5):
+        want = least_squares(lambda x, yi=y[i]: x[0] * np.exp(x[1] * t) - yi, x0[i], method="lm",
+                             xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+        np.testing.assert_allclose(got[i], want, rtol=1e-7)
+    X = np.column_stack([np.ones(t.size), t, t**2])
+    lin = bf._levenberg_marquardt(lambda x, idx: x @ X.T - y[idx],
+                                  lambda x, idx: np.repeat(X[None], idx.size, axis=0),
+                                  np.zeros((5, 3)))
+    np.testing.assert_allclose(lin, np.linalg.lstsq(X, y.T, rcond=None)[0].T, rtol=1e-8)
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(reference_rows=False),
+                                dict(reference_rows=False, free_roll=True),
+                                dict(free_roll=True)])
+def test_grouped_differences_are_the_column_by_column_ones(kw):
+    """The Jacobian over every parameter (and over the core ones alone) and the residual
+    covariance G diag(s^2) G' of the grouped differences equal central differences taken one
+    column at a time here (step 1e-6 as the model's), at a point off the solution."""
+    kw = dict(kw)  # not the parameter itself: a test run again must see free_roll again
+    free_roll = kw.pop("free_roll", False)
+    d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=2, **kw)
+    b = bf._Batch(d, 1.0, free_roll, math.radians(2.0))
+    x = np.random.default_rng(5).normal(0.0, 1e-3, (2, b.n_params))
+    z, h = b.z0, 1e-6
+
+    def column(fun, size, j):
+        e = np.zeros(size)
+        e[j] = h
+        return (fun(e) - fun(-e)) / (2 * h)
+
+    J = np.stack([column(lambda e: b.residuals(x + e, z), b.n_params, j)
+                  for j in range(b.n_params)], axis=-1)
+    np.testing.assert_allclose(b.jacobian_x(x, z, np.arange(b.n_params)), J, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.jacobian_x(x, z, np.arange(b.model.n_core)),
+                               J[..., :b.model.n_core], rtol=0, atol=1e-9)
+    G = np.stack([column(lambda e: b.residuals(x, z + e), z.shape[-1], j)
+                  for j in range(z.shape[-1])], axis=-1)
+    s = np.where(b.model.is_ins, 3 * A, 5 * A)
+    want = np.einsum("tik,k,tjk->tij", G, s**2, G)
+    np.testing.assert_allclose(b.residual_covariance(x, z, 3 * A, 5 * A), want,
+                               rtol=1e-7, atol=1e-9 * A**2)
+
+
+def test_trials_beyond_far_are_the_literal_fit_and_failures_are_nan(monkeypatch):
+    """With FAR = 0 every trial is handed to the literal path: its numbers, exactly; a trial the
+    literal path cannot determine is NaN and not ok."""
+    d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=2)
+    monkeypatch.setattr(bf, "FAR", 0.0)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=3 * A, side=1.0)
+    assert f.ok.all()
+    for i in range(2):
+        lit = pr.fit_procedure(d.trial(i), sigma_ins=2 * A, sigma_theodolite=3 * A,
+                               before=False)
+        np.testing.assert_array_equal(f.values[i], lit.values)
+        np.testing.assert_array_equal(f.covariance[i], lit.covariance)
+        assert f.chi2[i] == lit.chi2
+        np.testing.assert_array_equal(f.residuals[i], np.r_[lit.residuals[:, 0],
+                                                            lit.residuals[:, 1]])
+    calls = []
+
+    def refuse(data, **kw):
+        calls.append(kw)
+        raise pr.NotDetermined("no")
+
+    monkeypatch.setattr(pr, "fit_procedure", refuse)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=3 * A, side=-1.0, free_roll=True,
+                     roll_sigma=0.5)
+    assert len(calls) == 2 and calls[0] == dict(side=-1.0, free_roll=True, roll_sigma=0.5,
+                                                sigma_ins=2 * A, sigma_theodolite=3 * A,
+                                                before=False)
+    assert not f.ok.any()
+    assert np.isnan(f.values).all() and np.isnan(f.covariance).all()
+    assert np.isnan(f.residuals).all() and np.isnan(f.chi2).all()
+
+
+@pytest.mark.parametrize("reference_rows", [True, False])
+def test_a_left_roll_mirror_and_fitted_rolls_are_fitted_by_the_batch_itself(monkeypatch,
+                                                                           reference_rows):
+    """Roll mirror on the left (side -1), rolls fitted (their prior pseudo-observations in the
+    Jacobian: all 12 with reference rows, the two reference rolls of relative readings): no
+    trial is handed to the literal path (refused here), the offsets are within 5 of their
+    sigmas of the truth, and with no reading error (and, for relative readings, a level mount,
+    where the fitted reference rolls' prior costs nothing) the truth is met exactly and the
+    corrected readings meet the theodolite's directions."""
+    monkeypatch.setattr(pr, "fit_procedure", None)
+    d = bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(2 * A, 2 * A, 2 * A, 2 * A,
+                                                       math.radians(1.0)),
+                          np.random.default_rng(8), 3, side=-1.0, frame_heading=0.4,
+                          az_center=0.2, reference_rows=reference_rows)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A, side=-1.0,
+                     free_roll=reference_rows)  # relative readings: the two reference rolls
+    assert f.ok.all()
+    sigma = np.sqrt(np.diagonal(f.covariance, axis1=1, axis2=2)[:, :2])
+    assert (np.abs(f.values[:, :2] - [GAMMA, LAMBDA]) < 5 * sigma).all()
+    mount = math.radians(1.0) if reference_rows else 0.0  # else the roll prior pulls
+    d = bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(0, 0, 0, 0, mount),
+                          np.random.default_rng(8), 2, side=-1.0, frame_heading=0.4,
+                          az_center=0.2, reference_rows=reference_rows)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A, side=-1.0)
+    assert f.ok.all()
+    np.testing.assert_allclose(f.values[:, :2], [[GAMMA, LAMBDA]] * 2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(bf.consistency_angles(d, f, side=-1.0), 0.0, atol=1e-12)
+
+
+def test_defaults_are_a_central_mirror_at_zero_and_no_frame_heading():
+    """No offsets, no error, defaults: the theodolite reads the central mirror at azimuth 0 and
+    the roll mirror at +90 deg (side +1), both level, rows 0 and 1; the INS reads the same
+    headings (frame heading 0) and pitches."""
+    d = bf.simulate_block(0.0, 0.0, AZ, EL, Noise(0, 0, 0, 0, 0.0), np.random.default_rng(2), 2)
+    assert (d.center, d.roll_mirror) == (0, 1)
+    np.testing.assert_allclose(d.theodolite_az[:, :2], [[0.0, math.pi / 2]] * 2, atol=1e-15)
+    np.testing.assert_allclose(d.theodolite_el[:, :2], 0.0, atol=1e-15)
+    np.testing.assert_allclose(d.ins_az, d.theodolite_az, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.ins_el, d.theodolite_el, rtol=0, atol=1e-12)
+
+
+def test_one_degree_of_freedom_is_enough():
+    """Relative readings of two mirrors, no roll read: 4 readings, 3 parameters, dof 1."""
+    d = bf.simulate_block(GAMMA, LAMBDA, [0.3, 0.0], [0.0, 0.3], Noise(A, A, A, A, 0.0),
+                          np.random.default_rng(1), 2, reference_rows=False, with_roll=False)
+    f = bf.fit_block(d, sigma_ins=A, sigma_theodolite=A)
+    assert f.dof == 1 and f.values.shape == (2, 3)
