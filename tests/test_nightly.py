@@ -75,6 +75,7 @@ def test_history_holds_numbers_with_units_intervals_and_expectations(nightly_run
     assert (out / "plots" / "history.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_an_error_too_small_for_the_table1_tolerance_fails_the_next_nightly(nightly_run, tmp_path,
                                                                              monkeypatch):
     """A 1e-6 relative error in the equivalent angles of eqs. (15)-(16) keeps Table 1 within the

@@ -508,6 +508,7 @@ def test_declared_dependencies():
 # --- 9. provenance of every command that writes results -----------------------------------------
 
 
+@pytest.mark.slow
 def test_provenance_of_json_outputs(tmp_path):
     data = tmp_path / "c.csv"
     assert cli("collimation", "simulate", data).returncode == 0

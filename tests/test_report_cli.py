@@ -82,7 +82,7 @@ def test_report_refuses_what_it_cannot_rebuild(saved, tmp_path):
     assert done.returncode == 2
 
 
-@pytest.mark.parametrize("fmt", ["svg", "pdf"])
+@pytest.mark.parametrize("fmt", ["svg", pytest.param("pdf", marks=pytest.mark.slow)])
 def test_svg_and_pdf_are_the_same_bytes_on_every_render(saved, tmp_path, fmt):
     """`report --format svg|pdf` differed on every re-render (creation date, random clip-path
     ids); with the date left out and matplotlib's svg.hashsalt fixed, two renders a second
