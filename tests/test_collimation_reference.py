@@ -162,7 +162,8 @@ def test_noise_free_fit_recovers_the_offsets(rows, roll, side):
 
 def test_covariance_matches_the_first_order_design():
     """Relative readings, level mount, theodolite error only (INS error 0): the fit covariance
-    equals sigma^2 (X^T X)^-1 of the first-order design in (gamma, lambda, az_c)."""
+    and ``predicted_stderr`` equal sigma^2 (X^T X)^-1 of the first-order design in
+    (gamma, lambda, az_c)."""
     sigma = 2 * A
     d = pr.simulate_procedure(20 * A, 20 * A, AZ, EL, Noise(0, 0, 0, 0, 0), 1,
                               reference_rows=False, with_roll=False)
@@ -176,6 +177,10 @@ def test_covariance_matches_the_first_order_design():
     # the theodolite angle enters the residual with derivative -1: heading via az, pitch via el
     ref_cov = sigma**2 * np.linalg.inv(X.T @ X)
     np.testing.assert_allclose(f.covariance, ref_cov, rtol=2e-3, atol=2e-3 * ref_cov.max())
+    # the predicted standard errors, computed from the layout alone at the fitted offsets
+    got = pr.predicted_stderr(d, f, False, 1.0)
+    assert list(got) == ["axis_az", "axis_el", "reference_az"]
+    np.testing.assert_allclose(list(got.values()), np.sqrt(np.diag(ref_cov)), rtol=2e-3)
 
 
 def test_free_rolls_leave_the_offset_direction_unobserved():

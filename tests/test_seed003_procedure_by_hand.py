@@ -117,26 +117,6 @@ def test_too_few_measured_mirrors_are_counted_in_the_message():
         pr.fit_procedure(d)
 
 
-def test_predicted_stderr_is_the_first_order_design():
-    """Relative readings, level mount, theodolite error only: sigma^2 (X'X)^-1 of the first-order
-    design in (gamma, lambda, az_c) (the fit's covariance test gives X), here computed from the
-    layout alone at the fitted offsets."""
-    sigma = 2 * A
-    d = pr.simulate_procedure(20 * A, 20 * A, AZ, EL, Noise(0, 0, 0, 0, 0), 1,
-                              reference_rows=False, with_roll=False)
-    f = pr.fit_procedure(d, sigma_ins=0.0, sigma_theodolite=sigma)
-    m = AZ.size
-    X = np.zeros((2 * m, 3))
-    X[:m, 0] = 1 - 1 / np.cos(EL)
-    X[:m, 1] = -np.tan(EL) * np.cos(AZ)
-    X[m:, 1] = -1 + np.cos(AZ) + np.sin(AZ)
-    X[:m, 2] = -1.0
-    se = np.sqrt(np.diag(sigma**2 * np.linalg.inv(X.T @ X)))
-    got = pr.predicted_stderr(d, f, False, 1.0)
-    assert list(got) == ["axis_az", "axis_el", "reference_az"]
-    np.testing.assert_allclose(list(got.values()), se, rtol=2e-3)
-
-
 def test_pitch_reach_is_none_without_pitch_mirrors_or_within_the_highest():
     d = pr.simulate_procedure(100 * A, 400 * A, AZ, EL, Noise(0, 0, 0, 0, 0), 0,
                               reference_rows=False, with_roll=False)
