@@ -184,8 +184,22 @@ def test_grids_must_match_unless_allowed_and_then_rows_match_on_the_sweep_values
     with pytest.raises(InputError, match=r"^x and x have no grid point in common$"):
         compare_runs(a, disjoint, "mean", allow_different=True)
     with pytest.raises(InputError, match=r"^--statistic: 'p42' is not one of mean, std, p50, "
-                                         r"p90, p95, p99, max$"):
+                                         r"p90, p95, p99, cvar95, max$"):
         compare_runs(a, a, "p42")
+
+
+def test_the_superquantile_interval_is_read_like_a_percentiles():
+    """cvar95 carries its interval as cvar95_lo/_hi (normal, widened by the bin bounds): at
+    c = 0.95 with one row, widths 0.2 and 0.4 (asymmetric about the estimate) give the
+    difference a half-width sqrt(0.2^2 + 0.4^2) / 2 = sqrt(0.05) about the difference of the
+    estimates, 0.45 - 0.3 = 0.15: the interval [-0.0736, 0.3736] holds zero, so 'same'."""
+    a = _run("a", [0.3], stat="cvar95", lo=[0.25], hi=[0.45])
+    b = _run("b", [0.45], stat="cvar95", lo=[0.3], hi=[0.7])
+    t = compare_runs(a, b, "cvar95")
+    assert t["diff"][0] == pytest.approx(0.15, rel=1e-12)
+    assert t["diff_hi"][0] - t["diff"][0] == pytest.approx(math.sqrt(0.05), rel=1e-12)
+    assert t["diff"][0] - t["diff_lo"][0] == pytest.approx(math.sqrt(0.05), rel=1e-12)
+    assert list(t["verdict"]) == ["same"] and set(t["statistic"]) == {"cvar95"}
 
 
 def test_a_run_knows_its_name_and_sweep_keys():

@@ -148,7 +148,9 @@ def test_refraction_differs_from_the_stated_standard(tmp_path, capsys):
     dk, err = (report["named_effects"][0][k]["dk"] for k in ("parameters", "stderr"))
     assert abs(dk - 1.87) < 3 * err
     assert main(["diagnose", "ground", str(data), *LONG, "--refraction-k", "2",
-                 "--json", str(out)]) == 0
+                 "--json", str(out)]) == 2  # the first report is kept
+    assert main(["diagnose", "ground", str(data), *LONG, "--refraction-k", "2",
+                 "--json", str(out), "--force"]) == 0
     report = json.loads(out.read_text())
     assert report["named_effects"] == [] and report["gap"]["before"]["p_value"] > 0.01
     capsys.readouterr()

@@ -354,3 +354,17 @@ def test_staging_details_on_failure_and_before_the_first_result(tmp_path):
     (tmp_path / f".out.tmp-{dead}-file").write_text("")
     OutputDir(out, "run")._remove_stale()
     assert (tmp_path / f".out.tmp-{dead}-file").exists()
+
+
+def test_writable_file_refuses_an_existing_file_unless_replaced(tmp_path):
+    """A file (or a dangling link) already at the path is kept unless the command's --force asks
+    to replace it; nothing is written either way."""
+    old = tmp_path / "old.csv"
+    old.write_text("mine")
+    link = tmp_path / "link.csv"
+    link.symlink_to(tmp_path / "nowhere")
+    for p in (old, link):
+        assert _refused(files.writable_file, p) == (
+            f"{p}: exists; choose another name or add --force to replace it")
+        assert files.writable_file(p, replace=True) == p
+    assert old.read_text() == "mine"

@@ -91,6 +91,13 @@ def test_quantile_level_trials_is_a_narrow_count_just_after_a_wide_one(p, half, 
         planning.quantile_level_trials(p, 0.0, 0.95)
 
 
+def test_a_wide_quantile_level_band_needs_only_the_trials_of_an_interval():
+    """The median within 0.5 +- 0.45 at 95 %: any interval that exists is narrow enough, so
+    the count is the first with both ends, ln(0.025) / ln(0.5) = 5.32 -> 6 (the closed form
+    of interval_trials): ranks (1, 6) span 5/6 = 0.83 <= 0.9. The search once started at 9."""
+    assert planning.quantile_level_trials(0.5, 0.45, 0.95) == 6
+
+
 def test_trials_to_decide_rounds_up_and_broadcasts():
     """1000 (0.2 / 0.3)^2 = 444.4 -> 445; per row n0, h0 and d; d <= 0 needs infinitely many."""
     n = planning.trials_to_decide([1000, 500, 100], [0.2, 0.2, 0.5], [0.3, 0.1, 0.5])

@@ -68,7 +68,7 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         OutputDir(args.report, "diagnose", inputs=inputs).check()
     check_json_option(args)
     if args.emit_errors:
-        writable_file(args.emit_errors)
+        writable_file(args.emit_errors, args.force)
     data = read_camera_csv(args.model, args.views)
     source = f"{args.model}, {args.views}"
     sigma = args.pixel_sigma_px

@@ -16,6 +16,7 @@ from montecarlo.cli.collimation_report import (
 )
 from montecarlo.cli.common import (
     Parser,
+    add_force_option,
     add_json_option,
     check_json_option,
     emit_json,
@@ -226,7 +227,7 @@ def _cmd_collimation_simulate(args: argparse.Namespace) -> int:
             setattr(args, key, default)
     if args.n_azimuth + args.n_pitch == 0:
         raise InputError("--n-azimuth, --n-pitch: no mirrors to simulate (both are 0)")
-    writable_file(args.out)
+    writable_file(args.out, args.force)
     az, el, sets = paper_layout(args.n_azimuth, args.n_pitch, math.radians(args.azimuth_span_deg),
                                 math.radians(args.pitch_span_deg))
     truth = {"axis_az": args.axis_az_arcsec * ARCSEC, "axis_el": args.axis_el_arcsec * ARCSEC,
@@ -270,7 +271,7 @@ def _simulate_reference(args: argparse.Namespace) -> int:
     pitches = _angle_list("--pitch-elevations-deg", args.pitch_elevations_deg)
     if len(azimuths) + len(pitches) < 2:
         raise InputError("--azimuths-deg, --pitch-elevations-deg: at least 2 mirrors needed")
-    writable_file(args.out)
+    writable_file(args.out, args.force)
     az, el, sets = procedure_layout(azimuths, pitches)
     ins = args.ins_sigma_arcsec * ARCSEC
     noise = Noise(theodolite=args.theodolite_sigma_arcsec * ARCSEC, ins_heading=ins,
@@ -358,6 +359,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = csub.add_parser("simulate", help="write a simulated calibration CSV")
     p.add_argument("out", help="CSV file to write")
+    add_force_option(p)
     p.add_argument("--seed", type=nonnegative_int, default=0)
     p.add_argument("--axis-az-arcsec", type=finite, default=180.0)
     p.add_argument("--axis-el-arcsec", type=finite, default=180.0)

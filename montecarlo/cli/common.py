@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 from collections.abc import Callable
@@ -66,6 +67,14 @@ def add_json_option(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--json", nargs="?", const="-", metavar="PATH",
                    help=f"{what} as JSON: printed instead of the text, or written to PATH "
                    "(the text is printed too)")
+    add_force_option(p)
+
+
+def add_force_option(p: argparse.ArgumentParser) -> None:
+    """``--force``: replace a file the command writes if one is already there (else refused)."""
+    with contextlib.suppress(argparse.ArgumentError):  # already added for another file
+        p.add_argument("--force", action="store_true",
+                       help="replace the files this command writes if they exist")
 
 
 def check_json_option(args: argparse.Namespace) -> None:
@@ -73,7 +82,7 @@ def check_json_option(args: argparse.Namespace) -> None:
     from montecarlo.io.files import writable_file
 
     if getattr(args, "json", None) not in (None, "-"):
-        writable_file(args.json)
+        writable_file(args.json, args.force)
 
 
 def emit_json(args: argparse.Namespace, data: Any) -> bool:

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from montecarlo.cli.common import (
+    add_force_option,
     add_json_option,
     add_n_jobs_option,
     check_json_option,
@@ -111,13 +112,21 @@ def _cmd_size(args: argparse.Namespace) -> int:
     return 0
 
 
+def _problem_spec_paths(target: str | None, relations: list[str]) -> dict[str, Path]:
+    """The file of ``--problem-spec`` for each relation: the name given for one relation,
+    NAME-<relation>.json for several."""
+    if not target:
+        return {}
+    t = Path(target)
+    return {r: t if len(relations) == 1 else t.with_name(f"{t.stem}-{r}{t.suffix}")
+            for r in relations}
+
+
 def _cmd_budget(args: argparse.Namespace) -> int:
     from montecarlo.design import budget, budget_report, problem_spec
     from montecarlo.design.sizing_problem import KNOBS
 
     base, spec = _design_base(args)
-    if args.problem_spec:
-        writable_file(args.problem_spec)
     if args.from_problem_spec:
         given = problem_spec.read_problem_spec(args.from_problem_spec)
         base, relation = problem_spec.apply_problem_spec(base, given, args.from_problem_spec)
@@ -128,6 +137,9 @@ def _cmd_budget(args: argparse.Namespace) -> int:
             args.relations = [relation]
         if given.get("outputs") and args.metric is None:
             args.metric = str(given["outputs"][0])
+    spec_paths = _problem_spec_paths(args.problem_spec, args.relations)
+    for path in spec_paths.values():
+        writable_file(path, args.force)
     point = {n: float_of("--point", n, v) for n, v in args.point}
     for n in point:
         if n not in KNOBS:
@@ -148,15 +160,12 @@ def _cmd_budget(args: argparse.Namespace) -> int:
                          requirement=vars(req), points=points, samples=args.samples,
                          trials=args.trials, resamples=args.resamples)
         budget_report.write_html_report(results, staging)
-    if args.problem_spec:
-        target = Path(args.problem_spec)
-        for r in results:
-            path = target if len(results) == 1 else \
-                target.with_name(f"{target.stem}-{r.relation}{target.suffix}")
+    for r in results:
+        if r.relation in spec_paths:
             assert r.problem is not None
-            problem_spec.write_problem_spec(path, problem_spec.problem_spec(
+            problem_spec.write_problem_spec(spec_paths[r.relation], problem_spec.problem_spec(
                 r.problem, r.requirement.metric))
-            print(f"SALib problem ({r.relation}) written to {path}")
+            print(f"SALib problem ({r.relation}) written to {spec_paths[r.relation]}")
     for r in results:
         print(budget_report.format_budget(r))
         print()
@@ -310,6 +319,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--problem-spec", metavar="OUT.json",
                    help="also write the Sobol factors as a SALib problem (ProblemSpec JSON; "
                    "OUT-<relation>.json for each of several relations)")
+    add_force_option(p)
     p.add_argument("--from-problem-spec", metavar="IN.json",
                    help="take the error sources from a SALib problem (ProblemSpec JSON); its "
                    "pixel factor names set the relation")

@@ -12,6 +12,7 @@ import numpy as np
 
 from montecarlo.cli.common import (
     Parser,
+    add_force_option,
     add_json_option,
     add_n_jobs_option,
     check_json_option,
@@ -52,9 +53,9 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 def _check_files(args: argparse.Namespace) -> None:
     """Refuse, before any work, data and truth files that cannot be written."""
-    writable_file(args.out)
+    writable_file(args.out, args.force)
     if args.truth:
-        writable_file(args.truth)
+        writable_file(args.truth, args.force)
 
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
@@ -524,6 +525,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        help="inject an effect at MULT times its minimal detectable bias "
                        "(repeatable)")
         p.add_argument("--truth", metavar="OUT.json", help="also write how the data were made")
+        add_force_option(p)
 
     p = ssub.add_parser("ground", help="targets spread over the field at several ranges")
     effect_options(p)

@@ -171,7 +171,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        "and verdict per grid point (exit 1 if anything got worse)")
     p.add_argument("run_a", help="result directory of `montecarlo run` (the reference)")
     p.add_argument("run_b", help="result directory to compare with it")
-    p.add_argument("--statistic", choices=("mean", "std", "p50", "p90", "p95", "p99", "max"),
+    p.add_argument("--statistic", choices=("mean", "std", "p50", "p90", "p95", "p99", "cvar95",
+                                           "max"),
                    help="statistic to compare (default: the spec's, else p95)")
     p.add_argument("--rtol", type=nonnegative, default=1e-9,
                    help="relative tolerance of paired runs (same seed and trials; 1e-9)")

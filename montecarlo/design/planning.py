@@ -72,7 +72,7 @@ def quantile_level_trials(p: float, half_width: float, confidence: float) -> int
         _, r, s = order_statistic_ranks(n, p, confidence)
         return r >= 1 and s <= n and (s - r) / n <= 2.0 * half_width
 
-    hi = 16
+    hi = 1
     while not narrow(hi):
         hi *= 2
     lo = hi // 2

@@ -336,24 +336,27 @@ class OutputDir:
             self._release()
 
 
-def writable_file(path: str | Path) -> Path:
+def writable_file(path: str | Path, replace: bool = False) -> Path:
     """Check, before any work, that a file can be written at ``path`` (which is not touched).
 
     Raises
     ------
     InputError
-        The path is a directory, or its directory does not exist or is not writable.
+        The path is a directory, its directory does not exist or is not writable, or (unless
+        ``replace``, the command's ``--force``) a file is already there.
     """
     from montecarlo.errors import InputError
 
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path}: is a directory; give a file name")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"{path}: no such directory {str(parent)!r}")
-    if not os.access(parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+    if not path.parent.is_dir():
+        raise InputError(f"{path}: no such directory {str(path.parent)!r}")
+    if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists()
+                                                         and not os.access(path, os.W_OK)):
         raise InputError(f"{path}: not writable")
+    if (path.exists() or path.is_symlink()) and not replace:
+        raise InputError(f"{path}: exists; choose another name or add --force to replace it")
     return path
 
 

@@ -24,10 +24,13 @@ import numpy as np
 import pandas as pd
 from scipy.special import ndtri
 
+from montecarlo.engine.superquantile import CVAR_DEFAULT
 from montecarlo.errors import InputError
 from montecarlo.io.files import PROVENANCE
 
-STATISTICS = ("mean", "std", "p50", "p90", "p95", "p99", "max")
+STATISTICS = ("mean", "std", "p50", "p90", "p95", "p99", CVAR_DEFAULT, "max")
+"""What ``compare`` can compare: the summary columns; the percentiles and the superquantile
+carry their own interval (``_lo``, ``_hi``)."""
 VERDICTS = ("same", "better", "worse", "undecided")
 """'undecided': independent runs of a statistic that has no interval (max)."""
 RTOL = 1e-9
@@ -99,7 +102,7 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
     on = [*[k for k in keys if k in b.sweep_keys], "variant", "metric"]
     cols = list(dict.fromkeys(["unit", "sampling", "count", statistic, "std",
                                *([f"{statistic}_lo", f"{statistic}_hi"]
-                                 if statistic.startswith("p") else [])]))
+                                 if statistic not in ("mean", "std", "max") else [])]))
     left = a.summary[["point", *on, *[c for c in cols if c in a.summary]]]
     right = b.summary[[*on, *[c for c in cols if c in b.summary]]]
     rows = left.merge(right, on=on, suffixes=("_a", "_b"))
@@ -146,8 +149,9 @@ def simultaneous_z(confidence: float, m: int) -> float:
 
 
 def _se(rows: pd.DataFrame, statistic: str, side: str, z: float) -> np.ndarray:
-    """Standard error of one run's statistic (NaN where none can be given); a percentile's
-    distribution-free interval at the study's confidence is read as +-z standard errors.
+    """Standard error of one run's statistic (NaN where none can be given); the interval of a
+    percentile (distribution-free) or of the superquantile (asymptotically normal, widened by
+    its bin bounds) at the study's confidence is read as +-z standard errors.
 
     ``mean``: s / sqrt(n). ``std``: s / sqrt(2 (n - 1)), the large-sample standard error of a
     sample standard deviation of normal data (from var(s^2) = 2 sigma^4 / (n - 1) and the delta
