@@ -221,3 +221,17 @@ def test_every_distribution_shape_gives_the_same_statistics_on_both_paths(monkey
     pd.testing.assert_series_equal(a["count"], b["count"])
     for col in agg.VALUE_COLUMNS:
         np.testing.assert_allclose(a[col], b[col], rtol=1e-9, atol=1e-12, err_msg=col)
+
+
+def test_is_cached_asks_the_kernel_of_the_mounting_it_is_asked_about(monkeypatch):
+    """``is_cached(varying)`` is about the per-trial-mounting kernel when ``varying`` and the
+    fixed-mounting one otherwise (what the runner's first-use note says will compile)."""
+    asked = []
+
+    def cached(dispatcher):
+        asked.append(dispatcher)
+        return dispatcher is gk._solve_varying
+
+    monkeypatch.setattr(gk, "cached", cached)
+    assert gk.is_cached(True) is True and gk.is_cached(False) is False
+    assert asked == [gk._solve_varying, gk._solve_fixed]

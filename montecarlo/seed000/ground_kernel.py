@@ -18,8 +18,6 @@ the streaming statistics is :mod:`montecarlo.engine.accumulate`, a second numba 
 
 from __future__ import annotations
 
-import threading
-
 import numba as nb
 import numpy as np
 
@@ -257,17 +255,12 @@ def solve_chunk(C: np.ndarray, L: float, H: float, kx: float, kz: float, half_nx
         N_FIELDS, NaN where invalid.
     out_rows : ``output_rows(out)``, if the caller keeps it for a reused buffer.
     """
-    if not getattr(_thread, "one_numba_thread", False):  # the runner's workers are processes
-        nb.set_num_threads(1)
-        _thread.one_numba_thread = True
+    nb.set_num_threads(1)  # the runner's workers are processes (2 us a call: negligible)
     outs = output_rows(out) if out_rows is None else out_rows
     if C.ndim == 1:
         _solve_fixed(L, H, kx, kz, half_nx, half_nz, affine, C, *rows, *flags, *outs)
     else:
         _solve_varying(L, H, kx, kz, half_nx, half_nz, affine, *C, *rows, *flags, *outs)
-
-
-_thread = threading.local()
 
 
 def output_rows(out: np.ndarray) -> tuple[np.ndarray, ...]:
