@@ -129,20 +129,22 @@ def test_pitch_reach_stops_at_the_first_whole_degree_meeting_the_target(rows):
     20 deg, readings simulated without error at the fitted offsets, fitted: the fit's sigma of
     gamma there (s20; without reference rows the rolls at the reference pointings are fitted
     with the prior 0.03 rad, handed to both) is the target. Just above s20 the reach is 20 deg,
-    just below it 21 deg (sigma_gamma falls as the top rises: checked at 19 and 21 deg). The
-    fit's covariance and the search's agree to 3e-9 on noise-free readings; the margins are
+    just below it 21 deg (sigma_gamma falls as the top rises: checked at 19 and 21 deg); with
+    free rolls, just above the free-roll fit's s20, 20 deg. The fit's covariance and the
+    search's agree to 3e-9 on noise-free readings (1e-7 with free rolls); the margins are
     1e-6."""
     d = _reach_data(rows)
     f = pr.fit_procedure(d, side=-1.0, sigma_ins=2 * A, sigma_theodolite=2 * A, before=False)
     pitch = np.array([s == "pitch" for s in SETS])
 
-    def sigma_gamma(top_deg):
+    def sigma_gamma(top_deg, free_roll=False):
         el = np.where(pitch, EL * math.radians(top_deg) / EL.max(), EL)
         sim = pr.simulate_procedure(f.params["axis_az"], f.params["axis_el"], AZ + 0.3, el,
                                     Noise(0, 0, 0, 0, 0), 0, side=-1.0, az_center=0.3,
                                     reference_rows=rows, with_roll=True)
-        return pr.fit_procedure(sim, side=-1.0, roll_sigma=0.03, sigma_ins=2 * A,
-                                sigma_theodolite=2 * A, before=False).stderr["axis_az"]
+        return pr.fit_procedure(sim, side=-1.0, free_roll=free_roll, roll_sigma=0.03,
+                                sigma_ins=2 * A, sigma_theodolite=2 * A,
+                                before=False).stderr["axis_az"]
 
     s19, s20, s21 = (sigma_gamma(t) for t in (19, 20, 21))
     assert s19 > s20 * (1 + 1e-6) and s20 > s21 * (1 + 1e-6)
@@ -150,6 +152,11 @@ def test_pitch_reach_stops_at_the_first_whole_degree_meeting_the_target(rows):
         math.radians(20.0), rel=1e-12)
     assert pr.pitch_reach(d, f, pitch, False, 0.03, target=s20 * (1 - 1e-6)) == pytest.approx(
         math.radians(21.0), rel=1e-12)
+    # free rolls: sigma_gamma about three times larger (the fitted rolls turn the offset)
+    free = sigma_gamma(20, free_roll=True)
+    assert free > 2 * s19
+    assert pr.pitch_reach(d, f, pitch, True, 0.03, target=free * (1 + 1e-6)) == pytest.approx(
+        math.radians(20.0), rel=1e-12)
 
 
 def test_pitch_reach_ends_at_highest_inclusive():
