@@ -68,6 +68,11 @@ def test_relative_readings_of_an_ins_without_offsets_are_the_mirror_angles():
     d = pr.simulate_procedure(0.0, 0.0, AZ, EL, Noise(), 3, reference_rows=False,
                               with_roll=False)
     assert d.ins_roll is None
+    # by default absolute readings in a frame of heading 0: heading = azimuth, the reference
+    # mirrors at (0, 0) and (90 deg, 0) first
+    d = pr.simulate_procedure(0.0, 0.0, AZ, EL, Noise(0, 0, 0, 0, 0), 3)
+    np.testing.assert_allclose(wrap(d.ins_az - np.r_[0.0, math.pi / 2, AZ]), 0.0, atol=1e-14)
+    np.testing.assert_allclose(d.ins_el, np.r_[0.0, 0.0, EL], atol=1e-14)
 
 
 def test_residuals_without_offsets_are_the_first_order_form():
@@ -121,6 +126,12 @@ def test_too_few_measured_mirrors_are_counted_in_the_message():
     with pytest.raises(pr.NotDetermined, match=r"^1 measured mirrors give 2 readings; 2 "
                                                r"parameters need at least 2 measured mirrors$"):
         pr.fit_procedure(d, free_roll=True)
+    # enough readings, but three horizontal mirrors do not see gamma
+    d = pr.simulate_procedure(3e-3, 3e-3, AZ[:3], EL[:3], Noise(0, 0, 0, 0, 0), 0)
+    with pytest.raises(pr.NotDetermined, match=r"^the mirrors do not determine all parameters: "
+                                               r"not separable \(gamma needs pitch mirrors, "
+                                               r"lambda azimuth mirrors\)$"):
+        pr.fit_procedure(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
 
 
 def test_pitch_reach_is_none_without_pitch_mirrors_or_within_the_highest():

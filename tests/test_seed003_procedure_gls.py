@@ -198,7 +198,9 @@ def test_fit_is_the_gls_solution_written_out(rows, roll, side):
     ind = Independent(d, side, roll, roll_sigma)
     x, cov, chi2 = ind.fit(_truth(ind, d, g, lam, seed), s_ins, s_theo)
     se = np.sqrt(np.diag(cov))
-    assert len(f.names) == ind.n and f.names[:2] == ("axis_az", "axis_el")
+    names = {"free": tuple(f"roll_{i}" for i in range(M + 2)), "level": (),
+             "recorded": () if rows else ("roll_center", "roll_mirror")}[roll]
+    assert f.names == ("axis_az", "axis_el") + (() if rows else ("reference_az",)) + names
     assert np.all(np.abs(f.values - x) < 1e-3 * se), (f.values - x) / se
     np.testing.assert_allclose(f.covariance / np.outer(se, se), cov / np.outer(se, se), rtol=0,
                                atol=1e-4)
