@@ -50,11 +50,12 @@ class Independent:
     def __init__(self, d, side, roll, roll_sigma):
         self.d, self.side, self.roll, self.roll_sigma = d, side, roll, roll_sigma
         self.rows = d.center is not None
+        self.m = d.ins_az.size - (2 if self.rows else 0)  # measured mirrors
         self.readings = {"ins_az": d.ins_az, "ins_el": d.ins_el, "t_az": d.theodolite_az,
                          "t_el": d.theodolite_el}
         if roll == "recorded":
             self.readings["ins_roll"] = d.ins_roll
-        n_rolls = {"free": M + 2, "level": 0, "recorded": 0 if self.rows else 2}[roll]
+        n_rolls = {"free": self.m + 2, "level": 0, "recorded": 0 if self.rows else 2}[roll]
         self.n_core = 2 if self.rows else 3
         self.n = self.n_core + n_rolls
 
@@ -75,7 +76,7 @@ class Independent:
         p = np.asarray(p, float)
         g, lam = p[..., 0, None], p[..., 1, None]
         if self.rows:
-            zero = np.zeros((*p.shape[:-1], M + 2))
+            zero = np.zeros((*p.shape[:-1], self.m + 2))
             rolls = {"free": p[..., 2:], "level": zero}.get(self.roll, r.get("ins_roll"))
             t_az, t_el = r["t_az"], r["t_el"]
             return ref.relative_readings(
@@ -85,11 +86,12 @@ class Independent:
         az_c = p[..., 2, None]
         relative = self.roll == "recorded"
         if self.roll == "free":
-            roll_k, roll_c, roll_r = p[..., 3:3 + M], p[..., 3 + M, None], p[..., 4 + M, None]
+            m = self.m
+            roll_k, roll_c, roll_r = p[..., 3:3 + m], p[..., 3 + m, None], p[..., 4 + m, None]
         elif relative:
             roll_k, roll_c, roll_r = r["ins_roll"], p[..., 3, None], p[..., 4, None]
         else:
-            roll_k, roll_c, roll_r = np.zeros(M), 0.0, 0.0
+            roll_k, roll_c, roll_r = np.zeros(self.m), 0.0, 0.0
         return ref.relative_readings(g, lam, r["t_az"], r["t_el"], roll_k,
                                      (az_c, 0.0, roll_c),
                                      (az_c + self.side * math.pi / 2, 0.0, roll_r), self.side,
@@ -306,3 +308,25 @@ def test_free_rolls_keep_the_lowest_of_the_mirror_image_starts():
     assert at_truth[2] == pytest.approx(14.876, abs=1e-3) and chi2 == pytest.approx(9.017, abs=1e-3)
     assert f.chi2 == pytest.approx(chi2, rel=1e-5)
     assert np.all(np.abs(f.values - x) < 1e-3 * np.sqrt(np.diag(cov)))
+
+
+@pytest.mark.parametrize(("rows", "roll", "mirrors"), [(False, "recorded", M), (False, "level", 2)])
+def test_a_posteriori_sigma_scales_the_readings_not_the_prior(rows, roll, mirrors):
+    """Both sigmas None: one sigma for both kinds of reading, ``sqrt(r^T C1^-1 r / dof)`` at the
+    fit with 1″ readings (C1 their residual covariance; the prior's pseudo-observations are
+    not part of r: the roll prior is a fixed spread, not scaled). Relative readings with the
+    rolls at the reference mirrors fitted (a prior: 20 - 5 + 2 = 17 dof), and two mirrors
+    without roll (4 - 3 = 1 dof). 1e-4 relative (the fixed point of the covariance)."""
+    idx = np.r_[0, 5] if mirrors == 2 else np.arange(M)
+    noise = Noise(3 * A, 3 * A, 3 * A, 3 * A, 0.02 if roll == "recorded" else 0.0)
+    d = pr.simulate_procedure(350 * A, -250 * A, AZ[idx], EL[idx], noise, 8, az_center=0.1,
+                              reference_rows=rows, with_roll=roll == "recorded")
+    f = pr.fit_procedure(d, roll_sigma=0.05, before=False)
+    ind = Independent(d, 1.0, roll, 0.05)
+    x = ind.fit(_truth(ind, d, 350 * A, -250 * A, 8), A, A)[0]
+    r = ind.residuals(x)
+    dof = 2 * idx.size + (ind.n - ind.n_core) - ind.n
+    assert f.dof == dof == (17 if mirrors == M else 1)
+    sigma = A * math.sqrt(r @ np.linalg.solve(ind.covariance(x, A, A), r) / dof)
+    assert f.sigma_source == "a posteriori"
+    assert f.sigma_ins == f.sigma_theodolite == pytest.approx(sigma, rel=1e-4)

@@ -44,7 +44,7 @@ def _spy(monkeypatch):
                                                     (False, "level", 1.0),
                                                     (False, "free", -1.0)])
 def test_acceptance_trials_pass_each_option_on(monkeypatch, rows, roll, side):
-    """Per trial (docstring): gamma, lambda uniform in ``offsets`` with random signs, a frame
+    """Per trial (docstring): gamma, lambda uniform in ``offsets``, each with a random sign, a frame
     heading in [-pi, pi), readings with errors ``noise_sigma`` each and the mount roll unless the
     case is "level", fitted with the known sigmas, free rolls for "free", no residuals before;
     the errors reported are the fit's values minus the truth drawn."""
@@ -61,6 +61,7 @@ def test_acceptance_trials_pass_each_option_on(monkeypatch, rows, roll, side):
     # 32 signs and 16 headings of a fair draw: every sign appears (chance 2^-31 otherwise);
     # a heading above 1 and one below -1 (chance (1 - (pi - 1) / (2 pi))^16 < 1e-3 each)
     assert (truth > 0).any(axis=0).all() and (truth < 0).any(axis=0).all()
+    assert (np.sign(truth[:, 0]) != np.sign(truth[:, 1])).any()  # one sign each (2^-15)
     heading = np.array([c["frame_heading"] for c in calls])
     assert np.all((heading >= -math.pi) & (heading < math.pi))
     assert heading.max() > 1 and heading.min() < -1
@@ -115,16 +116,17 @@ def test_acceptance_case_runs_the_named_case(monkeypatch, name, pitches, rows, r
     assert seen == {"side": side, "reference_rows": rows, "roll": roll}
 
 
-def _reach_data(rows):
-    """Reference rows or relative readings, roll recorded, roll mirror on the left, central
+def _reach_data(rows, with_roll=True):
+    """Reference rows or relative readings, roll recorded or not, roll mirror on the left, central
     mirror at azimuth 0.3: every input pitch_reach hands its simulation differs from the
     simulator's defaults."""
     return pr.simulate_procedure(100 * A, 400 * A, AZ + 0.3, EL, Noise(0, 0, 0, 0, 0), 0,
-                                 side=-1.0, az_center=0.3, reference_rows=rows, with_roll=True)
+                                 side=-1.0, az_center=0.3, reference_rows=rows,
+                                 with_roll=with_roll)
 
 
-@pytest.mark.parametrize("rows", [True, False])
-def test_pitch_reach_stops_at_the_first_whole_degree_meeting_the_target(rows):
+@pytest.mark.parametrize(("rows", "with_roll"), [(True, True), (False, True), (False, False)])
+def test_pitch_reach_stops_at_the_first_whole_degree_meeting_the_target(rows, with_roll):
     """The docstring's search, written out: the pitch mirrors' elevations scaled to a top of
     20 deg, readings simulated without error at the fitted offsets, fitted: the fit's sigma of
     gamma there (s20; without reference rows the rolls at the reference pointings are fitted
@@ -133,7 +135,7 @@ def test_pitch_reach_stops_at_the_first_whole_degree_meeting_the_target(rows):
     free rolls, just above the free-roll fit's s20, 20 deg. The fit's covariance and the
     search's agree to 3e-9 on noise-free readings (1e-7 with free rolls); the margins are
     1e-6."""
-    d = _reach_data(rows)
+    d = _reach_data(rows, with_roll)
     f = pr.fit_procedure(d, side=-1.0, sigma_ins=2 * A, sigma_theodolite=2 * A, before=False)
     pitch = np.array([s == "pitch" for s in SETS])
 
@@ -141,7 +143,7 @@ def test_pitch_reach_stops_at_the_first_whole_degree_meeting_the_target(rows):
         el = np.where(pitch, EL * math.radians(top_deg) / EL.max(), EL)
         sim = pr.simulate_procedure(f.params["axis_az"], f.params["axis_el"], AZ + 0.3, el,
                                     Noise(0, 0, 0, 0, 0), 0, side=-1.0, az_center=0.3,
-                                    reference_rows=rows, with_roll=True)
+                                    reference_rows=rows, with_roll=with_roll)
         return pr.fit_procedure(sim, side=-1.0, free_roll=free_roll, roll_sigma=0.03,
                                 sigma_ins=2 * A, sigma_theodolite=2 * A,
                                 before=False).stderr["axis_az"]
