@@ -126,7 +126,11 @@ def test_too_few_measured_mirrors_are_counted_in_the_message():
     with pytest.raises(pr.NotDetermined, match=r"^1 measured mirrors give 2 readings; 2 "
                                                r"parameters need at least 2 measured mirrors$"):
         pr.fit_procedure(d, free_roll=True)
-    # enough readings, but three horizontal mirrors do not see gamma
+
+
+def test_mirrors_that_do_not_see_gamma_are_refused_with_the_reason():
+    """Enough readings (three mirrors, reference rows: 6 - 2), but horizontal mirrors read
+    gamma only at second order: not separable, and the message says what is missing."""
     d = pr.simulate_procedure(3e-3, 3e-3, AZ[:3], EL[:3], Noise(0, 0, 0, 0, 0), 0)
     with pytest.raises(pr.NotDetermined, match=r"^the mirrors do not determine all parameters: "
                                                r"not separable \(gamma needs pitch mirrors, "
