@@ -68,6 +68,11 @@ def test_relative_readings_of_an_ins_without_offsets_are_the_mirror_angles():
     d = pr.simulate_procedure(0.0, 0.0, AZ, EL, Noise(), 3, reference_rows=False,
                               with_roll=False)
     assert d.ins_roll is None
+    # by default absolute readings in a frame of heading 0: heading = azimuth, the reference
+    # mirrors at (0, 0) and (90 deg, 0) first
+    d = pr.simulate_procedure(0.0, 0.0, AZ, EL, Noise(0, 0, 0, 0, 0), 3)
+    np.testing.assert_allclose(wrap(d.ins_az - np.r_[0.0, math.pi / 2, AZ]), 0.0, atol=1e-14)
+    np.testing.assert_allclose(d.ins_el, np.r_[0.0, 0.0, EL], atol=1e-14)
 
 
 def test_residuals_without_offsets_are_the_first_order_form():
@@ -110,11 +115,27 @@ def test_sigmas_given_estimated_or_one_missing():
 
 
 def test_too_few_measured_mirrors_are_counted_in_the_message():
+    """At least one degree of freedom: 2 m >= p + 1, so p = 3 (relative readings) and p = 2
+    (reference rows) both need 2 measured mirrors."""
     d = pr.simulate_procedure(0.0, 0.0, AZ[:1], EL[:1], Noise(), 0, reference_rows=False,
                               with_roll=False)
     with pytest.raises(pr.NotDetermined, match=r"^1 measured mirrors give 2 readings; 3 "
                                                r"parameters need at least 2 measured mirrors$"):
         pr.fit_procedure(d)
+    d = pr.simulate_procedure(0.0, 0.0, AZ[:1], EL[:1], Noise(), 0)
+    with pytest.raises(pr.NotDetermined, match=r"^1 measured mirrors give 2 readings; 2 "
+                                               r"parameters need at least 2 measured mirrors$"):
+        pr.fit_procedure(d, free_roll=True)
+
+
+def test_mirrors_that_do_not_see_gamma_are_refused_with_the_reason():
+    """Enough readings (three mirrors, reference rows: 6 - 2), but horizontal mirrors read
+    gamma only at second order: not separable, and the message says what is missing."""
+    d = pr.simulate_procedure(3e-3, 3e-3, AZ[:3], EL[:3], Noise(0, 0, 0, 0, 0), 0)
+    with pytest.raises(pr.NotDetermined, match=r"^the mirrors do not determine all parameters: "
+                                               r"not separable \(gamma needs pitch mirrors, "
+                                               r"lambda azimuth mirrors\)$"):
+        pr.fit_procedure(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
 
 
 def test_pitch_reach_is_none_without_pitch_mirrors_or_within_the_highest():
@@ -151,14 +172,16 @@ def test_acceptance_trials_report_errors_against_the_truth_drawn():
 @pytest.mark.parametrize(("rows", "roll", "side"), [(True, "recorded", 1.0), (True, "level", 1.0),
                                                     (False, "level", 1.0),
                                                     (False, "recorded", 1.0),
-                                                    (True, "recorded", -1.0)])
+                                                    (True, "recorded", -1.0),
+                                                    (False, "recorded", -1.0),
+                                                    (False, "level", -1.0)])
 def test_corrected_readings_meet_the_mirror_angles(rows, roll, side):
     """No reading error, central mirror at azimuth 0.2, rolled mount where recorded: the
     theodolite's angles relative to the central and the roll mirror are ``(az - 0.2, el)``; the
     readings corrected with the fitted offsets meet them; with the offsets set to zero the
     corrected readings deviate by the first-order form of docs/collimation.md
-    (``gamma (1 - 1/cos el) + lambda tan el (sin a - cos a)``, ``-lambda (1 - cos a - sin a)``,
-    a = az - 0.2, all rolls 0; second order below (|gamma| + |lambda|)^2 = 0.4")."""
+    (``gamma (1 - 1/cos el) + lambda tan el (sin a - s cos a)``, ``-lambda (1 - cos a - s sin a)``,
+    a = az - 0.2, s the side, all rolls 0; second order below (|gamma| + |lambda|)^2 = 0.4")."""
     import dataclasses
 
     g, lam = 80 * A, 50 * A
@@ -176,6 +199,8 @@ def test_corrected_readings_meet_the_mirror_angles(rows, roll, side):
     np.testing.assert_allclose(wrap(c_az - t_az), 0.0, atol=tol)
     np.testing.assert_allclose(c_el - t_el, 0.0, atol=tol)
     assert rel_roll.shape == AZ.shape
+    if roll == "recorded" and not rows:  # relative readings: the roll read is the relative roll
+        np.testing.assert_array_equal(rel_roll, d.ins_roll)
     if roll == "level":
         values = f.values.copy()
         values[:2] = 0.0
@@ -183,7 +208,8 @@ def test_corrected_readings_meet_the_mirror_angles(rows, roll, side):
         c_az, c_el, t_az, t_el, _ = pr.corrected_and_theodolite(d, zero)
         a = AZ - 0.2 if rows else AZ - f.params["reference_az"]
         second = (g + lam) ** 2
-        h = g * (1 - 1 / np.cos(EL)) + lam * np.tan(EL) * (np.sin(a) - np.cos(a))
+        h = g * (1 - 1 / np.cos(EL)) + lam * np.tan(EL) * (np.sin(a) - side * np.cos(a))
         if rows:  # with the reference azimuth fitted, a constant heading shift is absorbed
             np.testing.assert_allclose(wrap(c_az - t_az), h, atol=second)
-        np.testing.assert_allclose(c_el - t_el, -lam * (1 - np.cos(a) - np.sin(a)), atol=second)
+        np.testing.assert_allclose(c_el - t_el, -lam * (1 - np.cos(a) - side * np.sin(a)),
+                                   atol=second)
