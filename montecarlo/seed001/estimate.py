@@ -197,7 +197,8 @@ def predict_los(
     else:
         delta_p = np.stack([p[..., 0], p[..., 4], p[..., 3]], axis=-1)
         C_bc = camera_matrix(eta, eps, delta_p[..., None, :])  # seed 001, eq. (2)
-    aim = np.broadcast_to(np.asarray(aim_px, float), (*C_bc.shape[:-3], 2))
+    aim = np.asarray(aim_px, float)
+    aim = np.broadcast_to(aim, (*np.broadcast_shapes(C_bc.shape[:-3], aim.shape[:-1]), 2))
     target = target_direction(C_bc[..., 0, :, :], aim, camera)
     target_k = np.matmul(np.swapaxes(R, -1, -2), target[..., None, :, None])
     u = np.matmul(C_bc, target_k)[..., 0]

@@ -1,0 +1,143 @@
+"""Seed 001's estimator on a carrier that does not move, where every answer has a closed form.
+
+With the gimbal at rest at zero and a camera without installation angles, the camera frame is
+the carrier frame and the line of sight its y axis. A gyro bias ``b`` the estimator assumes
+turns the carrier it rebuilds from a zero gyro output by ``-b t``, which moves the target's
+image by ``x = -k_x b_z t``, ``z = k_z b_x t`` to first order (scipy's rotation vector gives
+the exact image). The installation angles and ``bias_y`` (a roll about the line of sight) do
+not move the image of a target at the centre: their standard deviations stay the prior's. For
+``bias_z`` (image x) and ``bias_x`` (image z) the estimator is a linear Gaussian regression of
+each image axis on ``[k t, 1]`` with the prior ``PRIOR_SIGMA``; with gyro noise the LOS walk
+adds ``(q k)^2 min(t_i - t_0, t_j - t_0)`` to the image noise's covariance ``r^2 I``. These
+regressions, the rotations and the exponential of a constant rate are worked here with numpy
+and scipy, not with the package.
+"""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from montecarlo.geometry.camera import Camera
+from montecarlo.seed001 import estimate as se
+
+CAMERA = Camera.from_degrees(5.0, 4.0, 1024, 768)  # k_x != k_z: an axis swapped shows
+KX, KZ = float(CAMERA.k_x), float(CAMERA.k_z)
+T = 3.0 + np.arange(101) / 25.0
+"""4 s at 25 Hz starting at 3 s (a walk counted from t = 0 instead of t[0] shows)."""
+N = T.size
+ZERO = np.zeros(N)
+R_PX = 0.1
+SIG_B, SIG_A, SIG_ANGLE = (se.PRIOR_SIGMA[k] for k in ("bias", "offset", "angle"))
+
+
+def _gls(y, k, q=0.0, mean0=0.0):
+    """Posterior mean and covariance of ``[b, a]`` for ``y = k (t - t0) b + a + walk + noise``
+    with the prior ``N([0, mean0], diag(SIG_B^2, SIG_A^2))``."""
+    s = T - T[0]
+    H = np.stack([k * s, np.ones(N)], -1)
+    cov_y = R_PX**2 * np.eye(N) + (q * k) ** 2 * np.minimum.outer(s, s)
+    prior_info = np.diag([SIG_B**-2, SIG_A**-2])
+    post = np.linalg.inv(prior_info + H.T @ np.linalg.solve(cov_y, H))
+    mean = post @ (prior_info @ [0.0, mean0] + H.T @ np.linalg.solve(cov_y, y))
+    return mean, post
+
+
+def _image(omega, aim=(0.0, 0.0)):
+    """Image [px] of the target seen at ``aim`` at ``T[0]`` by a camera on a carrier turning at
+    the constant body rate ``omega``: ``u_k = exp([omega (t_k - t_0)]x)^T e`` (scipy)."""
+    e = np.array([aim[0] / KX, 1.0, aim[1] / KZ])
+    R = Rotation.from_rotvec(np.outer(T - T[0], omega)).as_matrix()
+    u = np.swapaxes(R, -1, -2) @ (e / np.linalg.norm(e))
+    return np.stack([KX * u[:, 0] / u[:, 1], KZ * u[:, 2] / u[:, 1]], -1)
+
+
+@pytest.mark.parametrize("sampling", ["point", "interval-mean"])
+def test_carrier_attitude_of_a_constant_rate_is_its_exponential_in_a_deep_batch(sampling):
+    """A constant body rate ``w`` turns the carrier by ``exp([w (t - t0)]x)`` (scipy's rotation
+    vector); the rates have the batch shape (2, 3), and their interval means are the rate."""
+    omega = np.random.default_rng(3).normal(0.0, 0.2, (2, 3, 3))
+    R = se.carrier_attitude(T, np.broadcast_to(omega[..., None, :], (2, 3, N, 3)), sampling)
+    expected = Rotation.from_rotvec((omega[..., None, :] * (T - T[0])[:, None]).reshape(-1, 3))
+    assert R.shape == (2, 3, N, 3, 3)
+    np.testing.assert_allclose(R, expected.as_matrix().reshape(2, 3, N, 3, 3), rtol=0,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("sampling", ["point", "interval-mean"])
+def test_predict_los_takes_the_batch_from_whichever_input_has_it(sampling):
+    """The image of a still or turning carrier against :func:`_image`, with a batch of three in
+    the parameters (the biases), in the gyro output (constant rates) or in the aim point only."""
+    kw = {"gyro_sampling": sampling}
+    g = np.random.default_rng(4)
+    biases = g.normal(0.0, 3e-5, (3, 3))
+    rates = g.normal(0.0, 3e-3, (3, 3))
+    aims = np.array([[40.0, -25.0], [-300.0, 120.0], [0.0, 200.0]])
+    params = np.zeros((3, 8))
+    params[:, 5:8] = biases
+    cases = [  # (gyro, params, aim, expected)
+        (np.zeros((N, 3)), params, 0.0, [_image(-b) for b in biases]),
+        (np.broadcast_to(rates[:, None, :], (3, N, 3)), np.zeros(8), aims[0],
+         [_image(w, aims[0]) for w in rates]),
+        (np.broadcast_to(rates[0], (N, 3)), np.zeros(8), aims, [_image(rates[0], a)
+                                                                for a in aims]),
+    ]
+    for gyro, p, aim, expected in cases:
+        got = se.predict_los(T, gyro, ZERO, ZERO, p, CAMERA, aim, **kw)
+        assert got.shape == (3, N, 2)
+        np.testing.assert_allclose(got, np.array(expected), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("reference", [False, True])
+@pytest.mark.parametrize("mount", ["patent", "inner-gimbal"])
+@pytest.mark.parametrize("gyro_noise", [0.0, np.radians(0.02) / 60.0])
+def test_a_still_recording_keeps_the_prior_of_what_it_cannot_see(gyro_noise, mount, reference):
+    """The target stays at the centre: every estimate is zero after one pass, the aim point is
+    the centre, and the standard deviations are the prior's for the angles and ``bias_y`` and
+    the regression's for ``bias_z`` (x) and ``bias_x`` (z), with the LOS walk of the gyro noise
+    (0.02 deg/sqrt(h)) in the image noise's covariance."""
+    est = se.estimate(T, np.zeros((N, 3)), ZERO, ZERO, np.zeros((N, 2)), CAMERA, R_PX,
+                      gyro_noise, mount=mount, reference=reference)
+    n = 9 if mount == "inner-gimbal" else 8
+    assert est.values.shape == (n,) and est.covariance.shape == (n, n)
+    assert est.passes == 1 and est.converged
+    np.testing.assert_array_equal(est.values, np.zeros(n))
+    np.testing.assert_array_equal(est.aim_px, [0.0, 0.0])
+    assert est.residual_rms == 0.0
+    unseen = [0, 1, 2, 3, 4, 6] + [8] * (n - 8)
+    np.testing.assert_allclose(est.sigma[unseen], [SIG_ANGLE] * 5 + [SIG_B]
+                               + [SIG_ANGLE] * (n - 8), rtol=1e-12)
+    for index, k in ((7, -KX), (5, KZ)):
+        _, post = _gls(np.zeros(N), k, gyro_noise)
+        assert est.sigma[index] == pytest.approx(np.sqrt(post[0, 0]), rel=1e-9)
+
+
+@pytest.mark.parametrize("reference", [False, True])
+def test_drifting_images_in_a_batch_give_the_regressions_estimates(reference):
+    """Three recordings of one still carrier (the batch is in the images only) whose images
+    drift as the biases ``[2, 0, -1]``, ``[-1, 0, 3]`` and ``[0, 0, 0]`` x 1e-5 rad/s would turn
+    them, plus 0.1 px of image noise: ``bias_z``, ``bias_x`` and the aim point are the
+    regressions' means (each axis on ``[k t, 1]``, the aim's prior centred at the first image),
+    the residual RMS that of the regressions' residuals.
+
+    Tolerances: the exact kinematics differ from the regression by the image's turn about its
+    aim point (the aim is within 0.05 px of the centre, 4e-6 rad off the axis, times the turn
+    8e-5 rad) and by the camera angles the prior lets trade against a bias (a few 1e-5 of it):
+    below 1e-3 of a standard deviation."""
+    biases = np.array([[2.0, 0.0, -1.0], [-1.0, 0.0, 3.0], [0.0, 0.0, 0.0]]) * 1e-5
+    noise = R_PX * np.random.default_rng(1).standard_normal((3, N, 2))
+    los = np.stack([_image(-b) for b in biases]) + noise
+    est = se.estimate(T, np.zeros((N, 3)), ZERO, ZERO, los, CAMERA, R_PX, reference=reference)
+    assert est.values.shape == (3, 8) and est.aim_px.shape == (3, 2)
+    assert np.all(est.converged) and est.passes == 2
+    residual = np.empty_like(los)
+    for i in range(3):
+        for axis, (index, k) in enumerate(((7, -KX), (5, KZ))):
+            mean, post = _gls(los[i, :, axis], k, mean0=los[i, 0, axis])
+            sig = np.sqrt(np.diag(post))
+            assert abs(est.values[i, index] - mean[0]) < 1e-3 * sig[0], (i, axis)
+            assert abs(est.aim_px[i, axis] - mean[1]) < 1e-3 * sig[1], (i, axis)
+            residual[i, :, axis] = los[i, :, axis] - k * (T - T[0]) * mean[0] - mean[1]
+        # the data see the biases: far from the prior
+        assert np.all(est.sigma[i, [5, 7]] < 0.02 * SIG_B)
+    np.testing.assert_allclose(est.residual_rms, np.sqrt(np.mean(residual**2, axis=(1, 2))),
+                               rtol=1e-6)
