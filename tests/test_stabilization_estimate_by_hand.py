@@ -141,3 +141,74 @@ def test_drifting_images_in_a_batch_give_the_regressions_estimates(reference):
         assert np.all(est.sigma[i, [5, 7]] < 0.02 * SIG_B)
     np.testing.assert_allclose(est.residual_rms, np.sqrt(np.mean(residual**2, axis=(1, 2))),
                                rtol=1e-6)
+
+
+# --- the recursion against batch least squares, written out ----------------------------------
+
+
+def _batch_gls(rows, obs, mean0, cov0, r, walk_var, transition=None, forgetting=1.0):
+    """Posterior of ``[x, w_0]`` for ``y_k = A_k x + w_k + v_k``, ``w_k = F_k w_{k-1} + q_k``,
+    ``q_k ~ N(0, diag(walk_var_k))``, as one generalised least squares: ``w_k = Phi_k w_0 +
+    e_k`` with ``Phi_k = F_k ... F_1`` and ``e_k = sum_j F_k ... F_{j+1} q_j``. With
+    ``forgetting = lam`` (no walk): step k's information weighted by ``lam^(N-1-k)``, the
+    prior's by ``lam^N``."""
+    n, _, p = rows.shape
+    F = np.broadcast_to(np.eye(2), (n, 2, 2)) if transition is None else transition
+    carry = np.zeros((n, n, 2, 2))  # carry[k, j] = F_k ... F_{j+1} for j <= k
+    for j in range(n):
+        carry[j, j] = np.eye(2)
+        for k in range(j + 1, n):
+            carry[k, j] = F[k] @ carry[k - 1, j]
+    cov_e = np.zeros((2 * n, 2 * n))
+    for j in range(1, n):
+        B = carry[:, j].reshape(2 * n, 2)
+        cov_e += B @ np.diag(walk_var[j]) @ B.T
+    H = np.concatenate([rows.reshape(-1, p), carry[:, 0].reshape(2 * n, 2)], axis=1)
+    weight = np.repeat(forgetting ** (n - 1 - np.arange(n)), 2)
+    cov_y = cov_e + r * np.diag(1.0 / weight)
+    prior_info = np.linalg.inv(cov0) * forgetting**n
+    post = np.linalg.inv(prior_info + H.T @ np.linalg.solve(cov_y, H))
+    return post @ (prior_info @ mean0 + H.T @ np.linalg.solve(cov_y, obs.ravel())), post
+
+
+@pytest.mark.parametrize("held_by", ["rows", "obs", "prior_mean", "prior_cov", "walk_var",
+                                     "walk_transition"])
+def test_rls_takes_the_batch_from_whichever_input_has_it(held_by):
+    """Three problems that differ in one input only (a turning, growing walk), against
+    :func:`_batch_gls` each."""
+    n, p, r = 30, 3, 0.04
+    g = np.random.default_rng(8)
+    scale = np.array([1.0, 0.5, 2.0])
+    turn = g.uniform(-0.1, 0.1, n) * (scale[:, None] if held_by == "walk_transition" else 1.0)
+    inputs = {"rows": g.normal(size=(n, 2, p)), "obs": g.normal(size=(n, 2)),
+              "prior_mean": g.normal(size=p + 2), "prior_cov": np.diag([4.0, 4.0, 4.0, 9.0, 9.0]),
+              "walk_var": g.uniform(0.01, 0.05, (n, 2)),
+              "walk_transition": 1.01 * np.stack([np.stack([np.cos(turn), -np.sin(turn)], -1),
+                                                  np.stack([np.sin(turn), np.cos(turn)], -1)],
+                                                 -2)}
+    if held_by != "walk_transition":  # the turns differ, the growth 1.01 is shared
+        inputs[held_by] = inputs[held_by] * scale.reshape(3, *[1] * inputs[held_by].ndim)
+    mean, cov = se.recursive_least_squares(inputs["rows"], inputs["obs"], inputs["prior_mean"],
+                                           inputs["prior_cov"], r,
+                                           walk_transition=inputs["walk_transition"],
+                                           walk_var=inputs["walk_var"])
+    assert mean.shape == (3, p + 2) and cov.shape == (3, p + 2, p + 2)
+    for i in range(3):
+        one = {k: v[i] if k == held_by else v for k, v in inputs.items()}
+        m, c = _batch_gls(one["rows"], one["obs"], one["prior_mean"], one["prior_cov"], r,
+                          one["walk_var"], one["walk_transition"])
+        np.testing.assert_allclose(mean[i, :p], m[:p], rtol=1e-8)
+        np.testing.assert_allclose(cov[i, :p, :p], c[:p, :p], rtol=1e-8)
+
+
+def test_rls_with_forgetting_is_exponentially_weighted_least_squares():
+    """Dividing the covariance by lam before each update weights step k by lam^(N-1-k) and the
+    prior by lam^N (information form: I <- lam I + A^T A / r, b <- lam b + A^T y / r)."""
+    n, p, r, lam = 40, 3, 0.01, 0.9
+    g = np.random.default_rng(9)
+    rows, obs = g.normal(size=(n, 2, p)), g.normal(size=(n, 2))
+    mean0, cov0 = g.normal(size=p + 2), np.diag([4.0, 4.0, 4.0, 9.0, 9.0])
+    mean, cov = se.recursive_least_squares(rows, obs, mean0, cov0, r, forgetting=lam)
+    m, c = _batch_gls(rows, obs, mean0, cov0, r, np.zeros((n, 2)), forgetting=lam)
+    np.testing.assert_allclose(mean, m, rtol=1e-8)
+    np.testing.assert_allclose(cov, c, rtol=1e-8, atol=1e-14)

@@ -404,7 +404,9 @@ def recursive_least_squares(
     rows = np.asarray(rows, float)
     obs = np.asarray(obs, float)
     n_steps, p = rows.shape[-3], rows.shape[-1]
-    batch = np.broadcast_shapes(rows.shape[:-3], obs.shape[:-2], np.shape(prior_mean)[:-1])
+    batch = np.broadcast_shapes(rows.shape[:-3], obs.shape[:-2], np.shape(prior_mean)[:-1],
+                                np.shape(prior_cov)[:-2], np.shape(walk_var)[:-2],
+                                np.shape(walk_transition)[:-3])
     x = np.array(np.broadcast_to(prior_mean, (*batch, p + 2)), float)
     P = np.array(np.broadcast_to(prior_cov, (*batch, p + 2, p + 2)), float)
     eye2 = np.eye(2)
