@@ -212,3 +212,12 @@ def test_rls_with_forgetting_is_exponentially_weighted_least_squares():
     m, c = _batch_gls(rows, obs, mean0, cov0, r, np.zeros((n, 2)), forgetting=lam)
     np.testing.assert_allclose(mean, m, rtol=1e-8)
     np.testing.assert_allclose(cov, c, rtol=1e-8, atol=1e-14)
+
+
+def test_ten_passes_by_default_when_a_pass_never_counts_as_converged():
+    """``tol = 0``: no step is below zero standard deviations, so every pass runs (10 by
+    default) and the estimate is not converged; one pass with ``max_passes = 1``."""
+    args = (T, np.zeros((N, 3)), ZERO, ZERO, np.zeros((N, 2)), CAMERA, R_PX)
+    est = se.estimate(*args, tol=0.0)
+    assert est.passes == 10 and not est.converged
+    assert se.estimate(*args, tol=0.0, max_passes=1).passes == 1
