@@ -221,3 +221,47 @@ def test_ten_passes_by_default_when_a_pass_never_counts_as_converged():
     est = se.estimate(*args, tol=0.0)
     assert est.passes == 10 and not est.converged
     assert se.estimate(*args, tol=0.0, max_passes=1).passes == 1
+
+
+@pytest.mark.parametrize("reference", [False, True])
+@pytest.mark.parametrize("held_by", ["gyro", "eta", "eps"])
+def test_a_still_recording_batch_held_by_one_input(held_by, reference):
+    """Three still recordings whose target stays at the centre, differing in one input only.
+
+    ``gyro``: constant outputs ``g`` (x and z, up to 3e-5 rad/s) with the gimbal at rest: no
+    image motion means ``bias = g``, the regressions of ``-k g t`` (x on ``bias_z``) and
+    ``k g t`` (z on ``bias_x``). ``eta`` / ``eps``: the gimbal at rest at azimuth or pitch
+    ``a``; the image then moves with the biases' components along the camera's axes: image x
+    with ``bias_z`` (azimuth) or ``[0, -sin a, cos a]`` (pitch), image z with
+    ``[cos a, sin a, 0]`` (azimuth) or ``bias_x`` (pitch), whose variances are the
+    regressions'; the component along the LOS, ``[-sin a, cos a, 0]`` or ``[0, cos a, sin a]``,
+    keeps the prior's, and so do the angles."""
+    g = np.array([[2.0, 0.0, -1.0], [-1.0, 0.0, 3.0], [0.5, 0.0, 0.5]]) * 1e-5
+    a = np.array([0.3, -0.5, 1.0])
+    gyro, eta, eps = np.zeros((N, 3)), ZERO, ZERO
+    if held_by == "gyro":
+        gyro = np.broadcast_to(g[:, None, :], (3, N, 3))
+    elif held_by == "eta":
+        eta = np.broadcast_to(a[:, None], (3, N))
+    else:
+        eps = np.broadcast_to(a[:, None], (3, N))
+    est = se.estimate(T, gyro, eta, eps, np.zeros((N, 2)), CAMERA, R_PX, reference=reference)
+    assert est.values.shape == (3, 8) and est.covariance.shape == (3, 8, 8)
+    np.testing.assert_allclose(est.sigma[:, :5], SIG_ANGLE, rtol=1e-9)
+    s = T - T[0]
+    for i in range(3):
+        cov = est.covariance[i, 5:8, 5:8]
+        if held_by == "gyro":
+            for index, k, y in ((7, -KX, -KX * g[i, 2] * s), (5, KZ, KZ * g[i, 0] * s)):
+                mean, post = _gls(y, k)
+                assert abs(est.values[i, index] - mean[0]) < 1e-3 * np.sqrt(post[0, 0])
+            continue
+        c, sn = np.cos(a[i]), np.sin(a[i])
+        if held_by == "eta":
+            along_x, along_z, los = [0.0, 0.0, 1.0], [c, sn, 0.0], [-sn, c, 0.0]
+        else:
+            along_x, along_z, los = [0.0, -sn, c], [1.0, 0.0, 0.0], [0.0, c, sn]
+        for u, k in ((along_x, -KX), (along_z, KZ)):
+            assert np.dot(u, cov @ u) == pytest.approx(_gls(np.zeros(N), k)[1][0, 0], rel=1e-9)
+        assert np.dot(los, cov @ los) == pytest.approx(SIG_B**2, rel=1e-9)
+        assert np.all(np.abs(est.values[i]) < 1e-9 * est.sigma[i])  # zero but for rounding
