@@ -265,3 +265,23 @@ def test_a_still_recording_batch_held_by_one_input(held_by, reference):
             assert np.dot(u, cov @ u) == pytest.approx(_gls(np.zeros(N), k)[1][0, 0], rel=1e-9)
         assert np.dot(los, cov @ los) == pytest.approx(SIG_B**2, rel=1e-9)
         assert np.all(np.abs(est.values[i]) < 1e-9 * est.sigma[i])  # zero but for rounding
+
+
+def test_names_and_the_compensation_taken_from_an_estimate():
+    """The state order written out, and the loop's corrections picked from it by name
+    (claim 1, fourth step): ``[dpx, dgx, dgy, dz]``, the three biases, and ``dgz`` for the
+    inner-gimbal mount only (the patent mount's loop needs no ``dgz``: zero)."""
+    names = ("delta_px", "delta_gx", "delta_gy", "delta_z", "delta_py",
+             "bias_x", "bias_y", "bias_z")
+    assert se.parameter_names() == names
+    assert se.parameter_names("inner-gimbal") == (*names, "delta_gz")
+    values = np.arange(1.0, 10.0)
+    for mount, n in (("patent", 8), ("inner-gimbal", 9)):
+        est = se.Estimate(values=values[:n], covariance=np.eye(n), passes=1,
+                          converged=np.True_, residual_rms=0.0, aim_px=np.zeros(2), mount=mount)
+        assert est.names == se.parameter_names(mount)
+        comp = est.compensation()
+        by_name = dict(zip(est.names, values[:n], strict=True))
+        np.testing.assert_array_equal(comp.angles, [by_name[k] for k in names[:4]])
+        np.testing.assert_array_equal(comp.gyro_bias, [by_name[k] for k in names[5:8]])
+        assert comp.delta_gz == by_name.get("delta_gz", 0.0) and comp.mount == mount
