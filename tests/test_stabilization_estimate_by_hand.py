@@ -19,6 +19,8 @@ from scipy.spatial.transform import Rotation
 
 from montecarlo.geometry.camera import Camera
 from montecarlo.seed001 import estimate as se
+from montecarlo.seed001 import kinematics as kin
+from montecarlo.seed001 import simulate as sim
 
 CAMERA = Camera.from_degrees(5.0, 4.0, 1024, 768)  # k_x != k_z: an axis swapped shows
 KX, KZ = float(CAMERA.k_x), float(CAMERA.k_z)
@@ -221,6 +223,27 @@ def test_ten_passes_by_default_when_a_pass_never_counts_as_converged():
     est = se.estimate(*args, tol=0.0)
     assert est.passes == 10 and not est.converged
     assert se.estimate(*args, tol=0.0, max_passes=1).passes == 1
+    none = se.estimate(*args, max_passes=0)  # no pass: the prior, not converged
+    assert none.passes == 0 and none.converged.dtype == np.bool_ and not none.converged
+    np.testing.assert_array_equal(none.values, np.zeros(8))
+    np.testing.assert_allclose(none.sigma, [SIG_ANGLE] * 5 + [SIG_B] * 3, rtol=1e-12)
+
+
+def test_one_pass_sees_the_inner_gimbal_dgz_to_first_order():
+    """The first pass's rows are the first-order model about zero, ``dgz`` included with the
+    inner-gimbal mount: on noise-free exact data (10 s at 25 Hz, angles of 0.3-0.7 deg) its
+    estimate of the five angles is off only by the second-order terms, a few percent (as the
+    patent mount's single pass in ``test_printed_h21_biases_the_single_pass_estimate``)."""
+    d = np.pi / 180.0
+    setup = sim.Setup(duration=10.0, rate=25.0, aim_azimuth=20 * d, aim_pitch=10 * d,
+                      image_noise=0.0, mount="inner-gimbal")
+    rock = kin.Rocking(np.full(3, 5 * d), [0.25, 0.4, 0.32], [0.0, 1.0, 2.0])
+    dg, dp = np.array([0.5, -0.3, 0.7]) * d, np.array([0.4, 0.6, -0.6]) * d
+    run = sim.simulate(rock, setup, dg, dp)
+    truth = np.array([dp[0], dg[0], dg[1], dp[2] - dg[2], dg[2]])
+    one = se.estimate_record(run, setup, max_passes=1)
+    assert one.passes == 1
+    assert np.all(np.abs(one.values[[0, 1, 2, 3, 8]] - truth) < 0.05 * np.abs(truth))
 
 
 @pytest.mark.parametrize("reference", [False, True])
