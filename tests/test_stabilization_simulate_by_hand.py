@@ -93,3 +93,13 @@ def test_interval_mean_rows_hold_the_noise_the_loop_integrated():
         walk = -h * np.concatenate([np.zeros((20, 1)), np.cumsum(run.gyro[:, 1:, axis], -1)], -1)
         # the walk is ~ density sqrt(5 s) = 4.5e-4 rad; eq. (4)'s second-order terms ~ 2e-7
         np.testing.assert_allclose(angle, walk, rtol=0, atol=4e-6)
+
+
+def test_interval_means_of_a_still_carrier_are_the_bias_and_none_by_default():
+    """Eq. (1) on a carrier at rest: the IMU measures its bias only, whatever its installation
+    angles, so every interval mean is the bias, and zero without one."""
+    still = kin.Rocking(np.zeros(3), [0.1, 0.1, 0.1], 0.0)
+    t = np.arange(5) / 10.0
+    np.testing.assert_array_equal(sim.interval_mean_rate(still, t, 0.1, DELTA_G), np.zeros((5, 3)))
+    np.testing.assert_allclose(sim.interval_mean_rate(still, t, 0.1, DELTA_G, BIAS),
+                               np.broadcast_to(BIAS, (5, 3)), rtol=1e-12)
