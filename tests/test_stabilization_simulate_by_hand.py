@@ -1,4 +1,6 @@
-"""Seed 001's simulator: batches held by one input only, and the noise of interval-mean rows.
+"""Seed 001's simulator: batches held by one input only (the compensation's fields too, and the
+compiled target view against the numpy matrices), the noise of interval-mean rows, and the
+interval means of a carrier at rest.
 
 A batch of runs is the broadcast of the leading shapes of all inputs (:func:`simulate`'s
 docstring): each run of a batch held by one input alone must be the run of that input's
@@ -66,14 +68,28 @@ def test_a_batch_in_one_input_is_the_runs_of_its_elements(key, name, reference):
 
 
 @pytest.mark.parametrize("reference", [False, True])
-def test_a_batch_in_the_compensation_alone_is_the_runs_of_its_elements(reference):
-    """The compensated loop's angles and bias with a batch of three, everything else single."""
-    angles = np.array([0.4, 0.5, -0.3, -1.3]) * D * SCALE
-    compensation = sim.Compensation(angles, BIAS * SCALE)
-    batch = _run(SETUP, reference, compensation=compensation)
-    assert batch.eta.shape == (3, SETUP.times.size)
+@pytest.mark.parametrize("held_by", ["angles", "gyro_bias", "delta_gz", "delta_g"])
+def test_a_batch_in_one_compensation_field_or_beside_it(held_by, reference):
+    """A compensated loop whose batch of three is held by one field of the compensation alone
+    (``delta_gz`` with the inner-gimbal mount, where it is used), or by ``delta_g`` with a
+    single compensation: each run is that of its element."""
+    setup = SETUP if held_by != "delta_gz" else SETUPS["inner-mean-off"]
+    fields = {"angles": np.array([0.4, 0.5, -0.3, -1.3]) * D, "gyro_bias": BIAS,
+              "delta_gz": 0.7 * D}
+    batch_inputs = {"delta_g": DELTA_G * SCALE} if held_by == "delta_g" else {}
+    if held_by in fields:
+        fields[held_by] = fields[held_by] * (SCALE if held_by != "delta_gz" else SCALE[:, 0])
+    mount = setup.mount
+
+    def element(i):
+        return {k: v[i] if k == held_by else v for k, v in fields.items()}
+
+    batch = _run(setup, reference, compensation=sim.Compensation(**fields, mount=mount),
+                 **batch_inputs)
+    assert batch.eta.shape == (3, setup.times.size)
     for i in range(3):
-        one = _run(SETUP, reference, compensation=sim.Compensation(angles[i], BIAS * SCALE[i]))
+        one = _run(setup, reference, compensation=sim.Compensation(**element(i), mount=mount),
+                   **{k: v[i] for k, v in batch_inputs.items()})
         np.testing.assert_allclose(batch.eta[i], one.eta, rtol=0, atol=1e-12)
         np.testing.assert_allclose(batch.los_px[i], one.los_px, rtol=0, atol=1e-9)
 
@@ -103,3 +119,22 @@ def test_interval_means_of_a_still_carrier_are_the_bias_and_none_by_default():
     np.testing.assert_array_equal(sim.interval_mean_rate(still, t, 0.1, DELTA_G), np.zeros((5, 3)))
     np.testing.assert_allclose(sim.interval_mean_rate(still, t, 0.1, DELTA_G, BIAS),
                                np.broadcast_to(BIAS, (5, 3)), rtol=1e-12)
+
+
+@pytest.mark.parametrize("held_by", ["carrier", "eta", "eps", "delta_p"])
+def test_compiled_target_view_takes_the_batch_from_whichever_input_has_it(held_by):
+    """``u_k = C_n^c(k) c_0`` with ``c_0`` row y of ``C_n^c(0)`` (the LOS at t = 0) and
+    ``C_n^c = camera_matrix(eta, eps, delta_p) C_n^b`` (eq. (2), the carrier's attitude from its
+    Euler angles), written with the numpy matrices, for a batch of three in one input only."""
+    t = SETUP.times
+    g = np.random.default_rng(6)
+    rock = kin.Rocking(AMPLITUDE * (SCALE if held_by == "carrier" else 1.0), FREQUENCY, PHASE)
+    eta = 0.3 + 0.1 * np.sin(t) * (SCALE if held_by == "eta" else 1.0)
+    eps = 0.2 - 0.1 * np.cos(t) * (SCALE if held_by == "eps" else 1.0)
+    delta_p = DELTA_P * (SCALE if held_by == "delta_p" else 1.0) + g.normal(0, 1e-3, 3)
+    got = sim.target_view_compiled(sim.carrier_trig(rock.angles(t)), eta, eps, delta_p)
+    C_nc = kin.camera_matrix(eta, eps, np.asarray(delta_p)[..., None, :]) @ rock.attitude(t)
+    expected = C_nc @ C_nc[..., :1, 1, :, None]
+    assert got.shape == (3, t.size, 3)
+    np.testing.assert_allclose(got, np.broadcast_to(expected[..., 0], got.shape), rtol=0,
+                               atol=1e-13)
