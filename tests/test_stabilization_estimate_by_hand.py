@@ -38,11 +38,14 @@ def _gls(y, k, q=0.0, mean0=0.0, r=R_PX, lam=1.0):
     k's information weighted by ``lam^(N-1-k)`` and the prior's by ``lam^N``."""
     s = T - T[0]
     H = np.stack([k * s, np.ones(N)], -1)
-    cov_y = r**2 * np.diag(lam ** -(N - 1.0 - np.arange(N))) + (q * k) ** 2 * np.minimum.outer(
-        s, s)
+    noise_var = r**2 * lam ** -(N - 1.0 - np.arange(N))
+    if q == 0.0:  # a diagonal covariance: weights (no N x N solve)
+        weighted = H / noise_var[:, None]
+    else:
+        weighted = np.linalg.solve(np.diag(noise_var) + (q * k) ** 2 * np.minimum.outer(s, s), H)
     prior_info = np.diag([SIG_B**-2, SIG_A**-2]) * lam**N
-    post = np.linalg.inv(prior_info + H.T @ np.linalg.solve(cov_y, H))
-    mean = post @ (prior_info @ [0.0, mean0] + H.T @ np.linalg.solve(cov_y, y))
+    post = np.linalg.inv(prior_info + weighted.T @ H)
+    mean = post @ (prior_info @ [0.0, mean0] + weighted.T @ y)
     return mean, post
 
 
