@@ -197,7 +197,8 @@ def predict_los(
     else:
         delta_p = np.stack([p[..., 0], p[..., 4], p[..., 3]], axis=-1)
         C_bc = camera_matrix(eta, eps, delta_p[..., None, :])  # seed 001, eq. (2)
-    aim = np.broadcast_to(np.asarray(aim_px, float), (*C_bc.shape[:-3], 2))
+    aim = np.asarray(aim_px, float)
+    aim = np.broadcast_to(aim, (*np.broadcast_shapes(C_bc.shape[:-3], aim.shape[:-1]), 2))
     target = target_direction(C_bc[..., 0, :, :], aim, camera)
     target_k = np.matmul(np.swapaxes(R, -1, -2), target[..., None, :, None])
     u = np.matmul(C_bc, target_k)[..., 0]
@@ -403,7 +404,9 @@ def recursive_least_squares(
     rows = np.asarray(rows, float)
     obs = np.asarray(obs, float)
     n_steps, p = rows.shape[-3], rows.shape[-1]
-    batch = np.broadcast_shapes(rows.shape[:-3], obs.shape[:-2], np.shape(prior_mean)[:-1])
+    batch = np.broadcast_shapes(rows.shape[:-3], obs.shape[:-2], np.shape(prior_mean)[:-1],
+                                np.shape(prior_cov)[:-2], np.shape(walk_var)[:-2],
+                                np.shape(walk_transition)[:-3])
     x = np.array(np.broadcast_to(prior_mean, (*batch, p + 2)), float)
     P = np.array(np.broadcast_to(prior_cov, (*batch, p + 2, p + 2)), float)
     eye2 = np.eye(2)

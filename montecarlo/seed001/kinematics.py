@@ -107,9 +107,9 @@ class Rocking:
 
     def _arg(self, t: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         t = np.asarray(t, float)[..., None]
-        a = np.asarray(self.amplitude, float)[..., None, :]
-        w = 2.0 * np.pi * np.asarray(self.frequency, float)[..., None, :]
-        return a, w, w * t + np.asarray(self.phase, float)[..., None, :]
+        a = as_vector(self.amplitude)[..., None, :]
+        w = 2.0 * np.pi * as_vector(self.frequency)[..., None, :]
+        return a, w, w * t + as_vector(self.phase)[..., None, :]
 
     def angles(self, t: ArrayLike) -> FloatArray:
         """``[psi, theta, gamma]`` at times ``t`` (shape (N,)), shape (..., N, 3) [rad]."""

@@ -304,6 +304,7 @@ def target_view_compiled(
     camera = np.empty((6, *shape))
     for i, a in enumerate(angles):
         camera[2 * i], camera[2 * i + 1] = np.cos(a), np.sin(a)
+    carrier = carrier.reshape(6, *(1,) * (len(shape) + 1 - carrier.ndim), *carrier.shape[1:])
     carrier = np.broadcast_to(carrier, (6, *shape)).reshape(6, -1, shape[-1])
     u = np.empty((*carrier.shape[1:], 3))
     simulate_kernels.target_directions(np.ascontiguousarray(carrier),
@@ -431,6 +432,9 @@ def simulate(
     delta_g, delta_p, bias = (as_vector(x) for x in (delta_g, delta_p, gyro_bias))
     batch = batch_shape(delta_g, delta_p, bias, rocking.amplitude, rocking.frequency,
                          rocking.phase)
+    if compensation is not None:  # its batch too (each run draws its own noise)
+        batch = np.broadcast_shapes(batch, np.shape(compensation.delta_gz),
+                                    batch_shape(compensation.angles, compensation.gyro_bias))
 
     # noise-free IMU output at the sample times and at the mid-points of the Runge-Kutta steps
     if motion is None:
