@@ -10,7 +10,8 @@ from scipy.optimize import least_squares
 
 from montecarlo.seed003 import batch_fit as bf
 from montecarlo.seed003 import procedure as pr
-from montecarlo.seed003.model import Noise
+from montecarlo.seed003 import reference as ref
+from montecarlo.seed003.model import Noise, attitude_angles, wrap
 
 A = math.radians(1.0 / 3600.0)  # one arc-second [rad]
 AZ, EL, _ = pr.procedure_layout()  # 5 azimuth + 5 pitch mirrors: m = 10
@@ -230,3 +231,50 @@ def test_one_degree_of_freedom_is_enough():
                           np.random.default_rng(1), 2, reference_rows=False, with_roll=False)
     f = bf.fit_block(d, sigma_ins=A, sigma_theodolite=A)
     assert f.dof == 1 and f.values.shape == (2, 3)
+
+
+def test_fitted_rolls_keep_the_lowest_of_the_mirror_image_minima(monkeypatch):
+    """A cost with a second minimum, built by hand. Reference rows, every roll fitted (prior
+    sigma 2 deg), no reading error; the 12 pointings (central mirror, roll mirror at 90 deg,
+    the 10 mirrors) rolled by RA = (1, 6, 1, -15, 7, 2, -8, 3, 1, 1, -2, 3) deg (trial 0,
+    offsets 3000", 1000") and RB = (3, 18, 3, -46, 20, 6, -23, 10, 4, 2, -6, 9) deg (trial 1,
+    offsets 1000", -1000"); both sum to 0. The truth fits every reading, so its cost is the
+    roll prior alone, sum (r / 2 deg)^2 = 101 and 915 (by hand): the minimum kept must be at
+    least that low. From the level start (rolls 0) trial 1 ends at a second minimum near
+    gamma = -1168", lambda = 323" with chi2 13736; from its mirror image (gamma negated) at
+    763. Trial 0 is the other way round (99 from the level start, 8752 from gamma negated).
+    The batch decides both itself (the literal path is not called) and keeps, per trial, the
+    lowest: the literal fit of trial 1 (MINPACK, one trial) agrees, to the tolerance derived
+    in tests/test_collimation_batch.py."""
+    literal = pr.fit_procedure
+    monkeypatch.setattr(pr, "fit_procedure", None)
+    ra = np.radians([1, 6, 1, -15, 7, 2, -8, 3, 1, 1, -2, 3])
+    rb = np.radians([3, 18, 3, -46, 20, 6, -23, 10, 4, 2, -6, 9])
+    rolls = np.stack([ra, rb])
+    truth = np.array([[3000.0, 1000.0], [1000.0, -1000.0]]) * A
+    prior = np.sum((rolls / math.radians(2.0)) ** 2, axis=1)
+    np.testing.assert_allclose(prior, [101.0, 915.0], rtol=1e-12)
+    pointing_az = np.r_[0.0, math.pi / 2, AZ]
+    pointing_el = np.r_[0.0, 0.0, EL]
+    heading, pitch, roll = attitude_angles(ref.attitude_at(
+        truth[:, :1], truth[:, 1:], pointing_az, pointing_el, rolls))
+    d = bf.BatchData(np.tile(pointing_az, (2, 1)), np.tile(pointing_el, (2, 1)), wrap(heading),
+                     pitch, roll, center=0, roll_mirror=1)
+    sigma = 2 * A
+    f = bf.fit_block(d, sigma_ins=sigma, sigma_theodolite=sigma, free_roll=True)
+    assert f.ok.all()
+    assert (f.chi2 <= prior).all()
+    # the premise: the level start alone ends far above the truth's cost in trial 1
+    b = bf._Batch(d, 1.0, True, math.radians(2.0))
+    level = bf._solve(b, np.zeros((2, b.n_params)), np.arange(2), sigma, sigma)[0]
+    _, _, w, _ = bf._solve(b, level, np.arange(b.n_params), sigma, sigma)
+    chi2_level = np.einsum("ti,ti->t", w, w)
+    assert chi2_level[1] > 10 * prior[1] and chi2_level[0] <= prior[0]
+    np.testing.assert_allclose(f.chi2[0], chi2_level[0], rtol=1e-9)
+    one = literal(d.trial(1), free_roll=True, sigma_ins=sigma, sigma_theodolite=sigma,
+                  before=False)
+    # to 1e-3 of each parameter's sigma, as tests/test_collimation_batch.py derives
+    allowed = np.maximum(1e-8, 1e-3 * np.sqrt(np.diagonal(one.covariance)))
+    assert (np.abs(f.values[1] - one.values) <= allowed).all()
+    assert f.chi2[1] == pytest.approx(one.chi2, rel=1e-7)
+    np.testing.assert_array_equal(f.rolls[1], f.values[1, 2:])
