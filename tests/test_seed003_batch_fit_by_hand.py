@@ -277,4 +277,46 @@ def test_fitted_rolls_keep_the_lowest_of_the_mirror_image_minima(monkeypatch):
     allowed = np.maximum(1e-8, 1e-3 * np.sqrt(np.diagonal(one.covariance)))
     assert (np.abs(f.values[1] - one.values) <= allowed).all()
     assert f.chi2[1] == pytest.approx(one.chi2, rel=1e-7)
+    np.testing.assert_allclose(f.covariance[1], one.covariance, rtol=1e-4,
+                               atol=1e-4 * np.abs(one.covariance).max())
     np.testing.assert_array_equal(f.rolls[1], f.values[1, 2:])
+
+
+def test_relative_readings_start_each_trial_at_its_own_central_azimuth(monkeypatch):
+    """Relative readings, no roll read, level mount, no error, central mirror at azimuth 0.8 rad
+    in one trial and -0.7 rad in the other: each trial's central azimuth is found (to 1e-12
+    rad) with the offsets, by the batch alone (the literal path is not called)."""
+    monkeypatch.setattr(pr, "fit_procedure", None)
+    blocks = [bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(0, 0, 0, 0, 0.0),
+                                np.random.default_rng(4), 1, az_center=c, reference_rows=False,
+                                with_roll=False) for c in (0.8, -0.7)]
+    d = bf.BatchData(*(np.concatenate([getattr(b, k) for b in blocks]) for k in
+                       ("theodolite_az", "theodolite_el", "ins_az", "ins_el")))
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
+    assert f.ok.all()
+    np.testing.assert_allclose(f.values, [[GAMMA, LAMBDA, 0.8], [GAMMA, LAMBDA, -0.7]],
+                               rtol=0, atol=1e-12)
+
+
+def test_a_solution_beyond_far_is_handed_to_the_literal_path_alone(monkeypatch):
+    """Relative readings as above, central azimuths 0.3 and 2.0 rad: the second solution has a
+    parameter beyond FAR = 1 rad (its central azimuth; its sigmas are arc-seconds), so that
+    trial, and that trial only, is fitted again by the literal path, whose numbers it keeps
+    (here the truth as well)."""
+    literal, called = pr.fit_procedure, []
+
+    def spy(data, **kw):
+        called.append(float(data.theodolite_az[0]))
+        return literal(data, **kw)
+
+    monkeypatch.setattr(pr, "fit_procedure", spy)
+    blocks = [bf.simulate_block(GAMMA, LAMBDA, AZ, EL, Noise(0, 0, 0, 0, 0.0),
+                                np.random.default_rng(4), 1, az_center=c, reference_rows=False,
+                                with_roll=False) for c in (0.3, 2.0)]
+    d = bf.BatchData(*(np.concatenate([getattr(b, k) for b in blocks]) for k in
+                       ("theodolite_az", "theodolite_el", "ins_az", "ins_el")))
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
+    assert called == [float(d.theodolite_az[1, 0])]
+    assert f.ok.all() and (np.sqrt(np.diagonal(f.covariance, axis1=1, axis2=2)) < 1e-3).all()
+    np.testing.assert_allclose(f.values, [[GAMMA, LAMBDA, 0.3], [GAMMA, LAMBDA, 2.0]],
+                               rtol=0, atol=1e-12)
