@@ -120,6 +120,70 @@ def test_levenberg_marquardt_reaches_scipys_minimum_trial_by_trial():
     np.testing.assert_allclose(lin, np.linalg.lstsq(X, y.T, rcond=None)[0].T, rtol=1e-8)
 
 
+def _marquardt_one_trial(fun, jac, x):
+    """The iteration of ``batch_fit._levenberg_marquardt``'s docstring and constants, written
+    again for one trial: step ``(A + mu diag A) d = -J'r`` (a zero diagonal entry taken as 1),
+    mu from 1e-3, /10 (not below 1e-12) after a step that lowers the cost, x10 after one that
+    does not; stop once the largest step component is at most 1e-14, or the decrease the step
+    promised, ``-2 g'd - d'Ad``, is at most 1e-10 of the cost, or mu exceeds 1e12. Returns the
+    solution and every point at which the residuals were evaluated."""
+    r = fun(x)
+    seen, cost, J, mu = [x.copy()], r @ r, jac(x), 1e-3
+    for _ in range(200):
+        A, g = J.T @ J, J.T @ r
+        diag = np.diag(A)
+        d = np.linalg.solve(A + mu * np.diag(np.where(diag > 0, diag, 1.0)), -g)
+        predicted = -2.0 * g @ d - d @ A @ d
+        r_new = fun(x + d)
+        seen.append(x + d)
+        if r_new @ r_new < cost:
+            x, r, cost = x + d, r_new, r_new @ r_new
+            J, mu = jac(x), max(mu / 10.0, 1e-12)
+        else:
+            mu *= 10.0
+        if np.max(np.abs(d)) <= 1e-14 or predicted <= 1e-10 * cost or mu > 1e12:
+            break
+    return x, seen
+
+
+def test_levenberg_marquardt_takes_marquardts_steps_trial_by_trial():
+    """y = a exp(b t) + noise for five trials whose residuals are scaled by 1, 0.01, 100, 1, 1
+    (diagonals of J'J below and above 1), from starts far enough to have steps rejected: each
+    trial of the batch evaluates the residuals at the same points, in the same number, as the
+    iteration written again here for that trial alone (to rounding, 1e-9 relative)."""
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 1.0, 9)
+    truth = np.column_stack([rng.uniform(1, 3, 5), rng.uniform(-2, 2, 5)])
+    y = truth[:, :1] * np.exp(truth[:, 1:] * t) + 0.05 * rng.standard_normal((5, t.size))
+    scale = np.array([1.0, 0.01, 100.0, 1.0, 1.0])
+    seen = [[] for _ in range(5)]
+
+    def fun(x, idx):
+        for i, row in zip(idx, x, strict=True):
+            seen[i].append(row.copy())
+        return scale[idx, None] * (x[:, :1] * np.exp(x[:, 1:] * t) - y[idx])
+
+    def jac(x, idx):
+        e = np.exp(x[:, 1:] * t)
+        return scale[idx, None, None] * np.stack([e, x[:, :1] * t * e], axis=-1)
+
+    x0 = np.column_stack([np.full(5, 0.1), np.linspace(-3, 3, 5)])
+    got = bf._levenberg_marquardt(fun, jac, x0)
+    rejected = 0
+    for i in range(5):
+        want, points = _marquardt_one_trial(
+            lambda x, i=i: scale[i] * (x[0] * np.exp(x[1] * t) - y[i]),
+            lambda x, i=i: scale[i] * np.column_stack([np.exp(x[1] * t),
+                                                      x[0] * t * np.exp(x[1] * t)]),
+            x0[i].copy())
+        assert len(seen[i]) == len(points), i
+        np.testing.assert_allclose(seen[i], points, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(got[i], want, rtol=1e-9)
+        costs = [np.sum((p[0] * np.exp(p[1] * t) - y[i]) ** 2) for p in points]
+        rejected += sum(c >= min(costs[:k]) for k, c in enumerate(costs) if k)
+    assert rejected >= 5  # the damping's increase is exercised
+
+
 @pytest.mark.parametrize("kw", [dict(), dict(reference_rows=False),
                                 dict(reference_rows=False, free_roll=True),
                                 dict(free_roll=True)])
