@@ -148,40 +148,52 @@ def _marquardt_one_trial(fun, jac, x):
 
 def test_levenberg_marquardt_takes_marquardts_steps_trial_by_trial():
     """y = a exp(b t) + noise for five trials whose residuals are scaled by 1, 0.01, 100, 1, 1
-    (diagonals of J'J below and above 1), from starts far enough to have steps rejected: each
-    trial of the batch evaluates the residuals at the same points, in the same number, as the
-    iteration written again here for that trial alone (to rounding, 1e-9 relative)."""
+    (diagonals of J'J below and above 1), from starts far enough to have steps rejected, and a
+    sixth trial with noise 1e-12 started near its truth (it stops while others go on, on the
+    step size: its steps fall below 1e-14 before the promised decrease falls below 1e-10 of its
+    cost, about 4e-24); a third parameter enters no residual (a zero column, a zero
+    diagonal entry). Each trial of the batch evaluates the residuals at the same points, in the
+    same number, as the iteration written again here for that trial alone (to rounding, 1e-9
+    relative)."""
     rng = np.random.default_rng(4)
     t = np.linspace(0.0, 1.0, 9)
     truth = np.column_stack([rng.uniform(1, 3, 5), rng.uniform(-2, 2, 5)])
     y = truth[:, :1] * np.exp(truth[:, 1:] * t) + 0.05 * rng.standard_normal((5, t.size))
-    scale = np.array([1.0, 0.01, 100.0, 1.0, 1.0])
-    seen = [[] for _ in range(5)]
+    truth = np.vstack([truth, [2.0, 0.5]])
+    y = np.vstack([y, 2.0 * np.exp(0.5 * t) + 1e-12 * rng.standard_normal(t.size)])
+    scale = np.array([1.0, 0.01, 100.0, 1.0, 1.0, 1.0])
+    seen = [[] for _ in range(6)]
+
+    def one(x, i):
+        return scale[i] * (x[0] * np.exp(x[1] * t) - y[i])
+
+    def one_jac(x, i):
+        e = np.exp(x[1] * t)
+        return scale[i] * np.column_stack([e, x[0] * t * e, 0 * t])
 
     def fun(x, idx):
         for i, row in zip(idx, x, strict=True):
             seen[i].append(row.copy())
-        return scale[idx, None] * (x[:, :1] * np.exp(x[:, 1:] * t) - y[idx])
+        return np.array([one(row, i) for i, row in zip(idx, x, strict=True)])
 
     def jac(x, idx):
-        e = np.exp(x[:, 1:] * t)
-        return scale[idx, None, None] * np.stack([e, x[:, :1] * t * e], axis=-1)
+        return np.array([one_jac(row, i) for i, row in zip(idx, x, strict=True)])
 
-    x0 = np.column_stack([np.full(5, 0.1), np.linspace(-3, 3, 5)])
+    x0 = np.column_stack([np.full(6, 0.1), np.r_[np.linspace(-3, 3, 5), 0.0], np.zeros(6)])
+    x0[5] = [truth[5, 0] + 1e-3, truth[5, 1] - 1e-3, 0.0]
     got = bf._levenberg_marquardt(fun, jac, x0)
     rejected = 0
-    for i in range(5):
-        want, points = _marquardt_one_trial(
-            lambda x, i=i: scale[i] * (x[0] * np.exp(x[1] * t) - y[i]),
-            lambda x, i=i: scale[i] * np.column_stack([np.exp(x[1] * t),
-                                                      x[0] * t * np.exp(x[1] * t)]),
-            x0[i].copy())
+    for i in range(6):
+        want, points = _marquardt_one_trial(lambda x, i=i: one(x, i),
+                                            lambda x, i=i: one_jac(x, i), x0[i].copy())
         assert len(seen[i]) == len(points), i
         np.testing.assert_allclose(seen[i], points, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(got[i], want, rtol=1e-9)
-        costs = [np.sum((p[0] * np.exp(p[1] * t) - y[i]) ** 2) for p in points]
+        costs = [np.sum(one(p, i) ** 2) for p in points]
         rejected += sum(c >= min(costs[:k]) for k, c in enumerate(costs) if k)
     assert rejected >= 5  # the damping's increase is exercised
+    assert len(seen[5]) < max(len(seen[i]) for i in range(5))  # stops while others go on
+    np.testing.assert_allclose(got[5, :2], truth[5], rtol=1e-10)
 
 
 @pytest.mark.parametrize("kw", [dict(), dict(reference_rows=False),
