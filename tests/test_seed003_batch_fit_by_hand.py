@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 from montecarlo.seed003 import batch_fit as bf
 from montecarlo.seed003 import procedure as pr
 from montecarlo.seed003 import reference as ref
-from montecarlo.seed003.model import Noise, attitude_angles, wrap
+from montecarlo.seed003.model import Noise, attitude_angles, direction, wrap
 
 A = math.radians(1.0 / 3600.0)  # one arc-second [rad]
 AZ, EL, _ = pr.procedure_layout()  # 5 azimuth + 5 pitch mirrors: m = 10
@@ -126,7 +126,8 @@ def _marquardt_one_trial(fun, jac, x):
     mu from 1e-3, /10 (not below 1e-12) after a step that lowers the cost, x10 after one that
     does not; stop once the largest step component is at most 1e-14, or the decrease the step
     promised, ``-2 g'd - d'Ad``, is at most 1e-10 of the cost, or mu exceeds 1e12. Returns the
-    solution and every point at which the residuals were evaluated."""
+    solution, every point at which the residuals were evaluated and the last promised decrease
+    over the cost."""
     r = fun(x)
     seen, cost, J, mu = [x.copy()], r @ r, jac(x), 1e-3
     for _ in range(200):
@@ -143,7 +144,7 @@ def _marquardt_one_trial(fun, jac, x):
             mu *= 10.0
         if np.max(np.abs(d)) <= 1e-14 or predicted <= 1e-10 * cost or mu > 1e12:
             break
-    return x, seen
+    return x, seen, predicted / cost
 
 
 def test_levenberg_marquardt_takes_marquardts_steps_trial_by_trial():
@@ -151,18 +152,21 @@ def test_levenberg_marquardt_takes_marquardts_steps_trial_by_trial():
     (diagonals of J'J below and above 1), from starts far enough to have steps rejected, and a
     sixth trial with noise 1e-12 started near its truth (it stops while others go on, on the
     step size: its steps fall below 1e-14 before the promised decrease falls below 1e-10 of its
-    cost, about 4e-24); a third parameter enters no residual (a zero column, a zero
-    diagonal entry). Each trial of the batch evaluates the residuals at the same points, in the
+    cost, about 4e-24), and a seventh with noise 1 (a large residual: the iteration converges
+    linearly, and stops on a promised decrease of 0.95e-10 of its cost, within a factor 2 of the
+    rule's 1e-10); a third parameter enters no residual (a zero column, a zero diagonal
+    entry). Each trial of the batch evaluates the residuals at the same points, in the
     same number, as the iteration written again here for that trial alone (to rounding, 1e-9
     relative)."""
     rng = np.random.default_rng(4)
     t = np.linspace(0.0, 1.0, 9)
     truth = np.column_stack([rng.uniform(1, 3, 5), rng.uniform(-2, 2, 5)])
     y = truth[:, :1] * np.exp(truth[:, 1:] * t) + 0.05 * rng.standard_normal((5, t.size))
-    truth = np.vstack([truth, [2.0, 0.5]])
-    y = np.vstack([y, 2.0 * np.exp(0.5 * t) + 1e-12 * rng.standard_normal(t.size)])
-    scale = np.array([1.0, 0.01, 100.0, 1.0, 1.0, 1.0])
-    seen = [[] for _ in range(6)]
+    truth = np.vstack([truth, [2.0, 0.5], [2.0, 0.5]])
+    y = np.vstack([y, 2.0 * np.exp(0.5 * t) + 1e-12 * rng.standard_normal(t.size),
+                   2.0 * np.exp(0.5 * t) + np.random.default_rng(5).standard_normal(t.size)])
+    scale = np.array([1.0, 0.01, 100.0, 1.0, 1.0, 1.0, 1.0])
+    seen = [[] for _ in range(7)]
 
     def one(x, i):
         return scale[i] * (x[0] * np.exp(x[1] * t) - y[i])
@@ -179,18 +183,21 @@ def test_levenberg_marquardt_takes_marquardts_steps_trial_by_trial():
     def jac(x, idx):
         return np.array([one_jac(row, i) for i, row in zip(idx, x, strict=True)])
 
-    x0 = np.column_stack([np.full(6, 0.1), np.r_[np.linspace(-3, 3, 5), 0.0], np.zeros(6)])
+    x0 = np.column_stack([np.full(7, 0.1), np.r_[np.linspace(-3, 3, 5), 0.0, 0.0], np.zeros(7)])
     x0[5] = [truth[5, 0] + 1e-3, truth[5, 1] - 1e-3, 0.0]
+    x0[6] = [1.0, 0.0, 0.0]
     got = bf._levenberg_marquardt(fun, jac, x0)
-    rejected = 0
-    for i in range(6):
-        want, points = _marquardt_one_trial(lambda x, i=i: one(x, i),
+    rejected, last = 0, []
+    for i in range(7):
+        want, points, promised = _marquardt_one_trial(lambda x, i=i: one(x, i),
                                             lambda x, i=i: one_jac(x, i), x0[i].copy())
         assert len(seen[i]) == len(points), i
         np.testing.assert_allclose(seen[i], points, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(got[i], want, rtol=1e-9)
         costs = [np.sum(one(p, i) ** 2) for p in points]
         rejected += sum(c >= min(costs[:k]) for k, c in enumerate(costs) if k)
+        last.append(promised)
+    assert 0.5e-10 < last[6] <= 1e-10  # the seventh stopped on the promised decrease
     assert rejected >= 5  # the damping's increase is exercised
     assert len(seen[5]) < max(len(seen[i]) for i in range(5))  # stops while others go on
     np.testing.assert_allclose(got[5, :2], truth[5], rtol=1e-10)
@@ -396,3 +403,24 @@ def test_a_solution_beyond_far_is_handed_to_the_literal_path_alone(monkeypatch):
     assert f.ok.all() and (np.sqrt(np.diagonal(f.covariance, axis1=1, axis2=2)) < 1e-3).all()
     np.testing.assert_allclose(f.values, [[GAMMA, LAMBDA, 0.3], [GAMMA, LAMBDA, 2.0]],
                                rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("reference_rows", [True, False])
+def test_a_block_of_one_trial(reference_rows):
+    """A block may hold a single trial (the last chunk of a study): no error, reading errors
+    of 2″ with the rolls recorded, the fit is the literal fit of that trial (to 1e-3 of each
+    sigma, as tests/test_collimation_batch.py derives) and its consistency angles are the
+    angles between the literal path's corrected readings and the theodolite's directions."""
+    d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=1,
+               reference_rows=reference_rows)
+    f = bf.fit_block(d, sigma_ins=2 * A, sigma_theodolite=2 * A)
+    one = pr.fit_procedure(d.trial(0), sigma_ins=2 * A, sigma_theodolite=2 * A, before=False)
+    assert f.ok.all() and f.values.shape == (1, one.values.size)
+    allowed = np.maximum(1e-8, 1e-3 * np.sqrt(np.diagonal(one.covariance)))
+    assert (np.abs(f.values[0] - one.values) <= allowed).all()
+    c_az, c_el, t_az, t_el, _ = pr.corrected_and_theodolite(d.trial(0), one)
+    want = np.arccos(np.clip(np.sum(direction(c_az, c_el) * direction(t_az, t_el), axis=-1),
+                             -1.0, 1.0))
+    got = bf.consistency_angles(d, f)
+    assert got.shape == (1, AZ.size)
+    np.testing.assert_allclose(got[0], want, rtol=0, atol=1e-3 * allowed[:2].max() + 1e-8)
