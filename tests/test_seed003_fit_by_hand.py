@@ -162,3 +162,62 @@ def test_residuals_before_are_those_of_the_reference_terms_weighted_as_given():
     r = weighted(x)
     np.testing.assert_allclose(f.residuals_before[:, 0], r[:az.size] * A, atol=1e-4 * A)
     np.testing.assert_allclose(f.residuals_before[:, 1], r[az.size:] * 10 * A, atol=1e-4 * A)
+
+
+def _normalised_ratio(el):
+    """Smallest over largest singular value of the linearised design (:func:`_design`) with
+    each column scaled to unit length: the quantity the separability test compares with 1e-4."""
+    X = _design(el)
+    s = np.linalg.svd(X / np.linalg.norm(X, axis=0), compute_uv=False)
+    return s[-1] / s[0]
+
+
+def test_separability_is_the_singular_value_ratio_of_the_column_normalised_jacobian():
+    """Three mirrors at elevations 0.5, 0.5 + d, 0.5 + 2d rad: frame_heading moves every
+    heading by 1, gamma by -1/cos el, nearly the same column for small d. Normalised, the
+    two columns at an angle theta give singular values sqrt(1 +- cos theta), the lambda column
+    1, so the ratio is about theta / 2, linear in d: 7.6e-5 for d = 3.4e-4 (refused) and
+    1.3e-4 for d = 6e-4 (accepted), either side of the stated 1e-4 by less than a factor
+    sqrt(2) = s_max, the largest singular value, so a threshold scaled by it would move the
+    verdict. No offsets (the fit's Jacobian at the solution is the linearised design)."""
+    az = np.array([0.0, 1.0, 2.0])
+    verdicts = []
+    for d, lo, hi in ((3.4e-4, 0.72e-4, 0.8e-4), (6e-4, 1.3e-4, 1.4e-4)):
+        el = 0.5 + d * np.arange(3)
+        assert lo < _normalised_ratio(el) < hi
+        heading, pitch = col.predict_readings({"frame_heading": 0.3}, az, el)
+        try:
+            f = cf.fit(az, el, heading, pitch, sigma=2 * A)
+        except cf.NotSeparable as err:
+            assert str(err).startswith("parameters frame_heading and axis_az are not separable")
+            verdicts.append("refused")
+        else:
+            assert f.params["frame_heading"] == pytest.approx(0.3, abs=1e-9)
+            verdicts.append("accepted")
+    assert verdicts == ["refused", "accepted"]
+
+
+@pytest.mark.parametrize("sigma", [(1.0, 1e5), (1e-5, 1.0), (1e5 * A, A)])
+def test_separability_does_not_depend_on_how_heading_and_pitch_are_weighted(sigma):
+    """The paper layout separates its three parameters (normalised ratio far above 1e-4);
+    whitening by sigmas 1e5 apart scales the heading columns against the pitch column by 1e5,
+    and some columns to norms below 1 (sigma 1e5 rad or 1 rad against unit Jacobian entries):
+    the column normalisation removes both, so the verdict and the noise-free solution stay."""
+    az, el, _ = col.paper_layout()
+    assert _normalised_ratio(el) > 0.1
+    truth = {"axis_az": 20 * A, "axis_el": -10 * A, "frame_heading": 0.1}
+    heading, pitch = col.predict_readings(truth, az, el)
+    f = cf.fit(az, el, heading, pitch, sigma=sigma)
+    for k, v in truth.items():
+        assert f.params[k] == pytest.approx(v, abs=1e-6 * A), k
+
+
+def test_a_parameter_no_mirror_sees_is_refused():
+    """Three mirrors on one pointing (az 0, el 0) with the frame tilts fitted: the pointing lies
+    along one tilt axis, so that tilt moves no reading and its Jacobian column is exactly zero;
+    the fit refuses it as not separable (no division of the zero column by its zero norm)."""
+    az, el = np.zeros(3), np.zeros(3)
+    heading, pitch = col.predict_readings({"frame_heading": 0.0}, az, el)
+    with pytest.raises(cf.NotSeparable, match=r"^parameters .* are not separable"):
+        cf.fit(az, el, heading, pitch, sigma=A,
+               effects=(*col.BASE_EFFECTS, "frame_misalignment"))
