@@ -59,7 +59,8 @@ def test_base_effect_and_candidates():
     assert pe.TRUTH_KEYS == ("frame_tilt_x", "frame_tilt_y", "ins_heading_scale",
                              "ins_pitch_scale", "ins_heading_bias", "ins_pitch_bias",
                              "theodolite_c", "reading_tilt_x", "reading_tilt_y")
-    assert pe.ROLL == "ins_roll" and pe.ROLL_PRIOR == pytest.approx(2 * DEG, rel=1e-15)
+    assert pe.ROLL == "ins_roll"
+    assert math.isclose(pe.ROLL_PRIOR, 2 * DEG, rel_tol=1e-15)
     assert pe.min_mirrors() == 3
 
 
@@ -683,3 +684,47 @@ def test_choose_conventions_stated_options_and_failures(monkeypatch):
         monkeypatch.setattr(pe, "fit_model", fail)
         with pytest.raises(FitError, match="cannot be fitted under any convention"):
             pe.choose_conventions(layout, 2 * A)
+
+
+def test_choose_conventions_compares_in_variance_units_of_one_and_goes_on_after_a_failure(
+        monkeypatch):
+    """The chi-squares are compared as they are (variance factor 1): gaps of 10 between the
+    senses and between the sides exceed the 99 % quantile of chi2(1), 6.63, and decide both
+    (half of them would not). A failed first side does not stop the second from being
+    fitted. A stated sense keeps its own name."""
+    layout = small_layout(False)
+    table = {(1.0, "same"): 12.0, (-1.0, "same"): 2.0, (1.0, "opposite"): 30.0,
+             (-1.0, "opposite"): 12.0}
+    fake = FakeFits(table)
+    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
+    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    _, sign, choice = pe.choose_conventions(layout, 2 * A)
+    assert choice["azimuth_sense"].decided and choice["roll_mirror"].decided
+    assert sign == -1.0 and choice["roll_mirror"].chosen == "left"
+    fake = FakeFits(table, fail={(1.0, "same")})
+    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
+    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    _, sign, choice = pe.choose_conventions(layout, 2 * A, sense="same")
+    assert sorted(c[1] for c in fake.calls) == [-1.0, 1.0]
+    assert choice["roll_mirror"].chi2 == {"right": math.inf, "left": 2.0} and sign == -1.0
+    assert choice["azimuth_sense"].name == "azimuth_sense"
+    assert choice["azimuth_sense"].chi2 == {"same": 2.0}
+
+
+def test_no_convention_fits_names_the_failure(monkeypatch):
+    def fail(key, effects):
+        raise FitError("x")
+
+    monkeypatch.setattr(pe, "procedure_problem", lambda *a: None)
+    monkeypatch.setattr(pe, "fit_model", fail)
+    with pytest.raises(FitError) as info:
+        pe.choose_conventions(small_layout(False), 2 * A)
+    assert str(info.value) == "the base model cannot be fitted under any convention"
+
+
+def test_exact_problem_of_a_layout_with_a_roll_column_has_no_roll_error():
+    """A layout that records rolls: the exact readings record the true (zero) rolls."""
+    layout = dataclasses.replace(small_layout(True), ins_roll=np.zeros(5))
+    truth = {"axis_az": 300 * A, "axis_el": -200 * A}
+    prob = pe.exact_problem(layout, truth, 2 * A)
+    assert np.max(np.abs(prob.residuals(truth))) < 1e-6
