@@ -337,35 +337,43 @@ def test_residual_covariance_by_hand_for_level_mirrors():
         np.testing.assert_allclose(cov, want, atol=1e-9 * s**2)
 
 
-def test_residual_covariance_of_relative_readings_by_finite_differences():
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_residual_covariance_of_relative_readings_by_finite_differences(side):
     """Without reference rows: the file's readings (2 per mirror, the theodolite's 2) and the
     INS's four readings at the reference mirrors, each with sigma s; the Jacobian by one-sided
-    differences in this test (step 1e-7), at an offset and a central azimuth."""
-    layout = small_layout(False)
-    params = {"axis_az": 300 * A, "axis_el": -200 * A, "reference_az": 0.3}
-    data = pe.simulate(layout, params, EXACT, 0)
+    differences in this test (step 1e-7), at offsets of about a degree and a central azimuth,
+    the reference readings those of the model (the roll mirror on its side)."""
+    layout = small_layout(False, side)
+    params = {"axis_az": 1.0 * DEG, "axis_el": -0.7 * DEG, "reference_az": 0.3}
+    data = pe.simulate(layout, params, EXACT, 0, side)
     s = 2e-5
     d = 1e-7
-    base = pe.raw_residuals(data, params)
+    base = pe.raw_residuals(data, params, side)
     base = np.concatenate([base[:, 0], base[:, 1]])
     cols = []
     for f in ("ins_az", "ins_el", "theodolite_az", "theodolite_el"):
         for i in range(3):
             v = getattr(data, f).copy()
             v[i] += d
-            r = pe.raw_residuals(dataclasses.replace(data, **{f: v}), params)
+            r = pe.raw_residuals(dataclasses.replace(data, **{f: v}), params, side)
             cols.append((np.concatenate([r[:, 0], r[:, 1]]) - base) / d)
-    # the reference readings enter the model's relative readings: the residual moves the other way
-    h, p = pe.reported_attitudes(params, data)
-    rh, rp = pe.relative_to_reference(h, p, 1.0)
+    # the INS's readings at the reference mirrors: az a and a + s 90 deg, level, autocollimated
+    # with the offsets (scipy); they enter the model's relative readings
+    ref_az = [0.3, 0.3 + side * math.pi / 2]
+    hp = [scipy_heading_pitch(params["axis_az"], params["axis_el"], a, 0.0, 0.0) for a in ref_az]
+    h = np.concatenate([[hp[0][0], hp[1][0]], np.zeros(3)])
+    p = np.concatenate([[hp[0][1], hp[1][1]], np.zeros(3)])
+    h[2:], p[2:] = pe.reported_attitudes(params, data, side)[0][2:], \
+        pe.reported_attitudes(params, data, side)[1][2:]
+    rh, rp = pe.relative_to_reference(h, p, side)
     for which, j in ((0, 0), (0, 1), (1, 0), (1, 1)):
         hh, pp = h.copy(), p.copy()
         (hh if which == 0 else pp)[j] += d
-        nh, np_ = pe.relative_to_reference(hh, pp, 1.0)
+        nh, np_ = pe.relative_to_reference(hh, pp, side)
         cols.append(np.concatenate([nh - rh, np_ - rp]) / d)
     G = np.array(cols).T
     want = s**2 * G @ G.T
-    got = pe.residual_covariance(data, params, s)
+    got = pe.residual_covariance(data, params, s, side)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-5 * s**2)
 
 
