@@ -483,6 +483,13 @@ def test_simulated_reference_rows_by_hand():
     np.testing.assert_allclose(rolled.ins_az, az, atol=1e-14)
     without = pe.simulate(pe.paper_layout(True), {}, noise, 7)
     assert without.ins_roll is None
+    # with offsets the INS autocollimates at the mount's rolls (scipy)
+    g, lam = 300 * A, -200 * A
+    rolled = pe.simulate(layout, {"axis_az": g, "axis_el": lam}, Noise(0, 0, 0, 0, 0.02), 7)
+    for i in range(n):
+        wh, wp = scipy_heading_pitch(g, lam, az[i], el[i], 0.02 * z[i])
+        assert rolled.ins_az[i] == pytest.approx(wh, abs=1e-12)
+        assert rolled.ins_el[i] == pytest.approx(wp, abs=1e-12)
 
 
 def test_simulated_relative_readings_by_hand():
