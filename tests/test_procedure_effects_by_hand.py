@@ -148,7 +148,10 @@ def test_relative_readings_of_a_level_reference_are_heading_differences(side):
                                       (np.array([[tilt[0]], [0.0]]), np.array([[tilt[1]], [0.0]])))
     np.testing.assert_allclose(bh, [want_h, rh], atol=1e-14)
     np.testing.assert_allclose(bp, [want_p, rp], atol=1e-14)
-    # a tilt about y alone is applied too
+    # a tilt about x alone, and one about y alone, are applied
+    _, xp = pe.relative_to_reference(h, p, side, (0.01, 0.0))
+    local = Rotation.from_rotvec([0.01, 0.0, 0.0]).inv().apply(direction(h[2:] - 0.3, p[2:]))
+    np.testing.assert_allclose(xp, az_el(local)[1], atol=1e-14)
     yh, _ = pe.relative_to_reference(h, p, side, (0.0, 0.01))
     local = Rotation.from_rotvec([0.0, 0.01, 0.0]).inv().apply(direction(h[2:] - 0.3, p[2:]))
     np.testing.assert_allclose(yh, az_el(local)[0], atol=1e-14)
@@ -516,13 +519,21 @@ def test_simulated_relative_readings_by_hand():
                                + c / np.cos(layout.theodolite_el), atol=1e-15)
     np.testing.assert_allclose(withc.ins_az, plain.ins_az, atol=1e-15)
     # a pitch error of the INS at the centre tilts R: the readings move by the tilt
-    z = np.random.default_rng(5).standard_normal(20)
+    z = np.random.default_rng(5).standard_normal(21)
     noisy = pe.simulate(layout, {"reference_az": a}, Noise(0, 0, 1e-3, 0, 0), 5)
     h = np.concatenate([[a, a + math.pi / 2], layout.theodolite_az])
     p = np.concatenate([[0, 0], layout.theodolite_el]) + 1e-3 * z[10:15]
     wh, wp = pe.relative_to_reference(h, p, 1.0)
     np.testing.assert_allclose(noisy.ins_el, wp, atol=1e-14)
     np.testing.assert_allclose(noisy.ins_az, wh, atol=1e-14)
+    # the theodolite's errors: azimuths then elevations, one draw per row after the INS's
+    theo = pe.simulate(dataclasses.replace(layout, ins_roll=np.zeros(3)), {"reference_az": a},
+                       Noise(1e-3, 0, 0, 0, 0), 5)
+    np.testing.assert_allclose(theo.theodolite_az, layout.theodolite_az + 1e-3 * z[15:18],
+                               atol=1e-15)
+    np.testing.assert_allclose(theo.theodolite_el, layout.theodolite_el + 1e-3 * z[18:21],
+                               atol=1e-15)
+    assert theo.ins_roll is None  # relative readings have no roll column
 
 
 def test_simulator_default_generator_and_side():
