@@ -758,3 +758,27 @@ def test_exact_problem_of_a_layout_with_a_roll_column_has_no_roll_error():
     truth = {"axis_az": 300 * A, "axis_el": -200 * A}
     prob = pe.exact_problem(layout, truth, 2 * A)
     assert np.max(np.abs(prob.residuals(truth))) < 1e-6
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_relative_rolls_on_either_side_and_in_a_batch(side):
+    """Relative readings with their relative roll column (reference pointings level): the
+    exact readings of :func:`montecarlo.seed003.reference.relative_readings` (rolls solved in
+    R) have no residual at the truth on either side of the roll mirror, and a batch of two
+    models (parameters (2, 1)) gives each model's residuals."""
+    from montecarlo.seed003 import reference as ref
+
+    layout = small_layout(False, side)
+    g, lam, a = 300 * A, -2000 * A, 0.2
+    rolls = np.array([0.03, -0.02, 0.04])
+    h, p, roll = ref.relative_readings(g, lam, layout.theodolite_az, layout.theodolite_el, rolls,
+                                       (a, 0.0, 0.0), (a + side * math.pi / 2, 0.0, 0.0), side,
+                                       True)
+    data = dataclasses.replace(layout, ins_az=h, ins_el=p, ins_roll=roll)
+    truth = {"axis_az": g, "axis_el": lam, "reference_az": a}
+    assert np.max(np.abs(pe.raw_residuals(data, truth, side))) < 1e-12
+    other = {"axis_az": -g, "axis_el": lam, "reference_az": a}
+    batch = pe.raw_residuals(data, {k: np.array([[truth[k]], [other[k]]]) for k in truth}, side)
+    np.testing.assert_allclose(batch[0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(batch[1], pe.raw_residuals(data, other, side), atol=1e-15)
+    assert np.max(np.abs(batch[1])) > 10 * A  # the two models differ
