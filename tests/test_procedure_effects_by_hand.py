@@ -536,7 +536,7 @@ def test_simulated_relative_readings_by_hand():
     assert theo.ins_roll is None  # relative readings have no roll column
 
 
-def test_simulator_default_generator_and_side():
+def test_simulator_draws_from_a_fresh_generator_by_default():
     layout = small_layout(True)
     data = pe.simulate(layout, {}, Noise(1e-3, 0, 0, 0, 0))
     assert np.all(data.theodolite_az != layout.theodolite_az)
