@@ -82,11 +82,14 @@ def test_report_refuses_what_it_cannot_rebuild(saved, tmp_path):
     assert done.returncode == 2
 
 
-@pytest.mark.parametrize("fmt", ["svg", pytest.param("pdf", marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("fmt", ["svg", "pdf"])
 def test_svg_and_pdf_are_the_same_bytes_on_every_render(saved, tmp_path, fmt):
     """`report --format svg|pdf` differed on every re-render (creation date, random clip-path
     ids); with the date left out and matplotlib's svg.hashsalt fixed, two renders a second
-    apart are byte-identical, as PNG already was."""
+    apart are byte-identical, as PNG already was. Slow (two reports a second apart, 11 s);
+    the bytes themselves are checked in the default run by
+    ``tests/test_io_files.py``'s test of ``figure_bytes``."""
     import time
 
     copies = []
