@@ -632,6 +632,14 @@ class FakeFits:
     def __init__(self, table, fail=()):
         self.table, self.fail, self.calls = table, set(fail), []
 
+    @classmethod
+    def installed(cls, monkeypatch, table, fail=()):
+        """A new stand-in, put in place of ``procedure_problem`` and ``fit_model``."""
+        fake = cls(table, fail)
+        monkeypatch.setattr(pe, "procedure_problem", fake.problem)
+        monkeypatch.setattr(pe, "fit_model", fake.fit)
+        return fake
+
     def problem(self, data, sigma, side, prior):
         a2 = data.theodolite_az[data.mirror.index("A2")]  # mirror A2 at +45 deg
         sense = "same" if a2 > 0 else "opposite"
@@ -652,9 +660,7 @@ def test_choose_conventions_takes_the_smallest_chi2(monkeypatch):
     layout = small_layout(False)
     table = {(1.0, "same"): 50.0, (-1.0, "same"): 40.0, (1.0, "opposite"): 3.0,
              (-1.0, "opposite"): 20.0}
-    fake = FakeFits(table)
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    fake = FakeFits.installed(monkeypatch, table)
     turned, sign, choice = pe.choose_conventions(layout, 2 * A, roll_prior=0.02)
     assert sorted(fake.calls) == sorted((sn, sd, 2 * A, 0.02) for sn in ("same", "opposite")
                                         for sd in (1.0, -1.0))
@@ -666,22 +672,16 @@ def test_choose_conventions_takes_the_smallest_chi2(monkeypatch):
     assert (r.name, r.chosen, r.stated, r.decided) == ("roll_mirror", "right", "right", True)
     assert r.chi2 == {"right": 3.0, "left": 20.0}
     # a tie of the sides keeps the stated right, with the reason of relative readings
-    fake = FakeFits({**table, (-1.0, "opposite"): 3.0})
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    fake = FakeFits.installed(monkeypatch, {**table, (-1.0, "opposite"): 3.0})
     _, sign, choice = pe.choose_conventions(layout, 2 * A)
     assert fake.calls[0][3] == pe.ROLL_PRIOR
     assert sign == 1.0 and choice["roll_mirror"].reason == "the readings do not depend on the side"
-    fake = FakeFits({**table, (-1.0, "opposite"): 3.0})
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    FakeFits.installed(monkeypatch, {**table, (-1.0, "opposite"): 3.0})
     _, _, choice = pe.choose_conventions(small_layout(True), 2 * A)
     assert choice["roll_mirror"].reason == "with reference rows the side does not change the fit"
     # a tie of the senses
-    fake = FakeFits({(1.0, "same"): 3.0, (-1.0, "same"): 9.0, (1.0, "opposite"): 3.0,
-                     (-1.0, "opposite"): 9.0})
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    FakeFits.installed(monkeypatch, {(1.0, "same"): 3.0, (-1.0, "same"): 9.0,
+                                     (1.0, "opposite"): 3.0, (-1.0, "opposite"): 9.0})
     turned, _, choice = pe.choose_conventions(layout, 2 * A)
     assert choice["azimuth_sense"].chosen == "same"
     assert choice["azimuth_sense"].reason == "the azimuth mirrors cannot tell the senses apart"
@@ -694,9 +694,7 @@ def test_choose_conventions_stated_options_and_failures(monkeypatch):
     layout = small_layout(False)
     table = {(1.0, "same"): 50.0, (-1.0, "same"): 4.0, (1.0, "opposite"): 3.0,
              (-1.0, "opposite"): 20.0}
-    fake = FakeFits(table, fail={(-1.0, "opposite")})
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    fake = FakeFits.installed(monkeypatch, table, fail={(-1.0, "opposite")})
     turned, sign, choice = pe.choose_conventions(layout, 2 * A, side="left", sense="opposite")
     assert sorted(c[:2] for c in fake.calls) == [("opposite", -1.0), ("opposite", 1.0)]
     s = choice["azimuth_sense"]
@@ -725,15 +723,11 @@ def test_choose_conventions_compares_in_variance_units_of_one_and_goes_on_after_
     layout = small_layout(False)
     table = {(1.0, "same"): 12.0, (-1.0, "same"): 2.0, (1.0, "opposite"): 30.0,
              (-1.0, "opposite"): 12.0}
-    fake = FakeFits(table)
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    FakeFits.installed(monkeypatch, table)
     _, sign, choice = pe.choose_conventions(layout, 2 * A)
     assert choice["azimuth_sense"].decided and choice["roll_mirror"].decided
     assert sign == -1.0 and choice["roll_mirror"].chosen == "left"
-    fake = FakeFits(table, fail={(1.0, "same")})
-    monkeypatch.setattr(pe, "procedure_problem", fake.problem)
-    monkeypatch.setattr(pe, "fit_model", fake.fit)
+    fake = FakeFits.installed(monkeypatch, table, fail={(1.0, "same")})
     _, sign, choice = pe.choose_conventions(layout, 2 * A, sense="same")
     assert sorted(c[1] for c in fake.calls) == [-1.0, 1.0]
     assert choice["roll_mirror"].chi2 == {"right": math.inf, "left": 2.0} and sign == -1.0
