@@ -1,8 +1,8 @@
 """Acceptance test: bad inputs are refused in one line, with exit code 2, writing nothing.
 
 Every case below is a study file, a CSV file or a flag combination that the command line must
-refuse. Each runs ``python -m montecarlo ...`` as a subprocess in a fresh temporary directory
-into which the case's input files (from ``tests/data/bad_inputs/``) are copied, and must:
+refuse. Each runs ``python -m montecarlo ...`` in a process of its own, in a fresh temporary
+directory into which the case's input files (from ``tests/data/bad_inputs/``) are copied, and must:
 
 * exit with code 2;
 * print exactly one line on stderr, starting with ``error: ``, that contains the case's
@@ -14,7 +14,9 @@ into which the case's input files (from ``tests/data/bad_inputs/``) are copied, 
   made by ``setup`` (``unchanged``) keep their content, size, mode and modification time.
 
 The cases selected for a session run a few at a time (:func:`outcomes`, one worker per core,
-at least two), since each is one short process spent mostly on Python start-up.
+at least two). Each case is one short process, most of which, started afresh, would be spent
+importing the libraries: so each worker is a server (``tests/forked_cli.py``) that imports them
+once and runs every case as ``python -m montecarlo`` does, in a child forked for it.
 
 The manifest is :data:`CASES`. ``argv`` and ``expect`` may use ``{tmp}``, the temporary
 directory. ``files`` are paths under ``tests/data/bad_inputs/``, copied into the temporary
@@ -30,6 +32,7 @@ with the observed behaviour as the reason, so that fixing the defect makes the s
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import stat
@@ -42,6 +45,7 @@ from pathlib import Path
 import pytest
 
 DATA = Path(__file__).parent / "data" / "bad_inputs"
+SERVER = Path(__file__).parent / "forked_cli.py"
 TIMEOUT = 60
 
 
@@ -698,22 +702,8 @@ CASES: list[Case] = [
 ]
 
 
-FAST_STUDY_CASES = frozenset({
-    "study-unknown-key-typo-H_mm", "study-wrong-type-string-number", "study-missing-required-H_m",
-    "study-toml-syntax-bad-number", "study-nan-value", "study-sweep-zip-lengths-differ",
-    "study-spec-unknown-metric", "study-name-with-path", "study-empty-file", "study-binary-file",
-    "study-air-unknown-param", "study-collimation-negative-mirrors",
-    "study-stabilization-wrong-type", "study-path-missing", "study-negative-base-replaced-by-sweep",
-    "study-byte-order-mark"})
-"""The study-file cases of the default run: one of each kind of mistake and of each system. The
-other study-file cases take the same validation and error path as these; they run with the slow
-tests (``make test-all``), which keeps the default run within its time."""
-
-
 def _param(case: Case):
     marks = [pytest.mark.xfail(reason=case.defect, strict=True)] if case.defect else []
-    if case.id.startswith("study-") and case.id not in FAST_STUDY_CASES:
-        marks.append(pytest.mark.slow)
     return pytest.param(case, id=case.id, marks=marks)
 
 
@@ -771,24 +761,52 @@ class Outcome:
     timed_out: bool = False
 
 
-def run_case(case: Case, work: Path) -> Outcome:
-    """Run one case in its own fresh working directory ``work``."""
+class ForkedCli:
+    """One ``tests/forked_cli.py`` server: ``python -m montecarlo`` with its imports done."""
+
+    def __init__(self) -> None:
+        env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1"}
+        self.server = subprocess.Popen([sys.executable, str(SERVER)], stdin=subprocess.PIPE,
+                                       stdout=subprocess.PIPE, text=True, env=env)
+
+    def run(self, argv: list[str], cwd: Path, out: Path, err: Path) -> dict:
+        """Run the command line in ``cwd``; returns its exit code and whether it timed out."""
+        assert self.server.stdin is not None and self.server.stdout is not None
+        request = {"argv": argv, "cwd": str(cwd), "stdout": str(out), "stderr": str(err),
+                   "timeout": TIMEOUT}
+        self.server.stdin.write(json.dumps(request) + "\n")
+        self.server.stdin.flush()
+        reply = self.server.stdout.readline()
+        assert reply, f"the command-line server stopped (exit {self.server.poll()})"
+        return json.loads(reply)
+
+    def close(self) -> None:
+        assert self.server.stdin is not None and self.server.stdout is not None
+        self.server.stdin.close()
+        self.server.wait(timeout=TIMEOUT)
+        self.server.stdout.close()
+
+
+def run_case(case: Case, work: Path, cli: ForkedCli) -> Outcome:
+    """Run one case in its own fresh working directory ``work`` (its output kept beside it)."""
     work.mkdir(parents=True)
     prepare(case, work)
     outcome = Outcome(work, snapshot(work))
-    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1"}
-    try:
-        out = subprocess.run([sys.executable, "-m", "montecarlo",
-                              *(fill(a, work) for a in case.argv)],
-                             cwd=work, capture_output=True, text=True, timeout=TIMEOUT, env=env,
-                             stdin=subprocess.DEVNULL)
-    except subprocess.TimeoutExpired:
-        outcome.timed_out = True
-    else:
-        outcome.returncode, outcome.stdout, outcome.stderr = \
-            out.returncode, out.stdout, out.stderr
+    out, err = work.with_suffix(".stdout"), work.with_suffix(".stderr")
+    reply = cli.run([fill(a, work) for a in case.argv], work, out, err)
+    outcome.returncode, outcome.timed_out = reply["returncode"], reply["timed_out"]
+    outcome.stdout, outcome.stderr = out.read_text(), err.read_text()
     outcome.after = snapshot(work)
     return outcome
+
+
+def run_cases(cases: list[tuple[Case, Path]]) -> dict[str, Outcome]:
+    """Run ``cases`` one after another on one server."""
+    cli = ForkedCli()
+    try:
+        return {case.id: run_case(case, work, cli) for case, work in cases}
+    finally:
+        cli.close()
 
 
 def _workers() -> int:
@@ -808,14 +826,15 @@ def _case_of(item: pytest.Item) -> Case | None:
 @pytest.fixture(scope="session")
 def outcomes(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
              ) -> dict[str, Outcome]:
-    """The outcome of every selected case, run a few at a time (each case is one short
-    process, most of it Python start-up, so the module takes half the time on 2 cores)."""
+    """The outcome of every selected case, run a few at a time, each worker a server that
+    imports the libraries once (see the module's docstring)."""
     selected = [c for c in map(_case_of, request.session.items) if c is not None]
     root = tmp_path_factory.mktemp("bad_inputs")
-    with ThreadPoolExecutor(max_workers=_workers()) as pool:
-        futures = {c.id: pool.submit(run_case, c, root / f"case{i:03d}")
-                   for i, c in enumerate(selected)}
-        return {case_id: f.result() for case_id, f in futures.items()}
+    work = [(c, root / f"case{i:03d}") for i, c in enumerate(selected)]
+    workers = _workers()
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        shares = pool.map(run_cases, [work[k::workers] for k in range(workers)])
+        return {case_id: o for share in shares for case_id, o in share.items()}
 
 
 def test_manifest_is_consistent():
