@@ -69,16 +69,8 @@ def test_noise_free_independent_data_give_the_offsets(tmp_path, case):
         assert fit.params["axis_el"] / ARCSEC == pytest.approx(lam, abs=0.01)
 
 
-REFERENCE_ERRORS_LEFT_OUT = pytest.mark.xfail(
-    strict=True, reason="the fit of relative readings leaves out the errors of the INS readings "
-    "at the reference mirrors (docs/collimation.md, 'A second simulator, written blind'): "
-    "lambda within 2 sigma in 88.0 % of 500 sets")
-COVERAGE_CASES = [pytest.param(c, marks=REFERENCE_ERRORS_LEFT_OUT)
-                  if c == ("pitch to 60", False, "level", "left") else c for c in CASES]
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("case", COVERAGE_CASES, ids=lambda c: f"{c[0]}-{c[1]}-{c[2]}-{c[3]}")
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c[0]}-{c[1]}-{c[2]}-{c[3]}")
 def test_offsets_within_2_sigma_on_independent_data(tmp_path, case):
     """500 calibrations per case, 2 arc-second theodolite and INS noise, mount rolling 1 deg
     (1 sigma) unless level; offsets uniform in 10-600 arc-seconds with random signs. The fit's

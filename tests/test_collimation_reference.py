@@ -61,6 +61,40 @@ def test_relative_readings_agree_with_an_independent_construction(side):
         assert r == pytest.approx(roll, abs=1e-9)
 
 
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_reference_reading_errors_build_the_frame_from_the_axes_read(side):
+    """The INS reads its heading and pitch at the central and the roll mirror with errors e; its
+    frame is built from the attitudes it read there (scipy's Z-X-Y with those errors added to
+    heading and pitch), the measured mirror's attitude is the true one. A heading error at C
+    alone turns the frame about the (near-vertical) z axis: every relative heading by -e_h."""
+    local = np.random.default_rng(8)
+    for _ in range(6):
+        gamma, lam = local.uniform(-0.01, 0.01, 2)
+        rolls = local.normal(0, 0.03, 3)
+        e = local.normal(0, 20 * A, 4)
+        k_az, k_el = local.uniform(-1.2, 1.2), local.uniform(-1.0, 1.0)
+        axes = []
+        for j, az in enumerate((0.3, 0.3 + side * math.pi / 2)):
+            yaw, pitch, roll = _scipy_attitude(gamma, lam, az, 0.0, rolls[j]).as_euler("ZXY")
+            read = Rotation.from_euler("ZXY", [yaw - e[2 * j], pitch + e[2 * j + 1], roll])
+            axes.append(read.as_matrix()[:, 1])
+        y = axes[0]
+        x = axes[1] - (axes[1] @ y) * y
+        x = side * x / np.linalg.norm(x)
+        C_R = np.column_stack([x, y, np.cross(x, y)])
+        C_k = _scipy_attitude(gamma, lam, k_az, k_el, rolls[2]).as_matrix()
+        yaw, pitch, roll = Rotation.from_matrix(C_R.T @ C_k).as_euler("ZXY")
+        args = (gamma, lam, k_az, k_el, rolls[2], (0.3, 0.0, rolls[0]),
+                (0.3 + side * math.pi / 2, 0.0, rolls[1]), side)
+        h, p, r = ref.relative_readings(*args, reference_error=e)
+        assert ref.wrap(h + yaw) == pytest.approx(0.0, abs=1e-9)
+        assert p == pytest.approx(pitch, abs=1e-9)
+        assert r == pytest.approx(roll, abs=1e-9)
+        h0, _, _ = ref.relative_readings(*args)
+        h1, _, _ = ref.relative_readings(*args, reference_error=[e[0], 0.0, 0.0, 0.0])
+        assert ref.wrap(h1 - h0) == pytest.approx(-e[0], rel=0.1)
+
+
 def test_reference_mirrors_read_zero_and_frame_is_a_rotation():
     """At the central mirror the reading is heading 0, pitch 0; at the roll mirror pitch 0."""
     gamma, lam = 300 * A, -200 * A

@@ -209,7 +209,8 @@ def test_levenberg_marquardt_takes_marquardts_steps_trial_by_trial():
 def test_grouped_differences_are_the_column_by_column_ones(kw):
     """The Jacobian over every parameter (and over the core ones alone) and the residual
     covariance G diag(s^2) G' of the grouped differences equal central differences taken one
-    column at a time here (step 1e-6 as the model's), at a point off the solution."""
+    column at a time here (step 1e-6 as the model's), at a point off the solution; relative
+    readings add the columns of the INS's heading and pitch errors at the reference pointings."""
     kw = dict(kw)  # not the parameter itself: a test run again must see free_roll again
     free_roll = kw.pop("free_roll", False)
     d = _block(Noise(2 * A, 2 * A, 2 * A, 2 * A, math.radians(1.0)), n=2, **kw)
@@ -231,6 +232,10 @@ def test_grouped_differences_are_the_column_by_column_ones(kw):
                   for j in range(z.shape[-1])], axis=-1)
     s = np.where(b.model.is_ins, 3 * A, 5 * A)
     want = np.einsum("tik,k,tjk->tij", G, s**2, G)
+    if not kw.get("reference_rows", True):  # the INS's heading, pitch errors at C and R
+        H = np.stack([column(lambda e: b.residuals(x, z, e), 4, j) for j in range(4)], axis=-1)
+        assert np.abs(H).max() > 0.5  # a heading error at C shifts every relative heading
+        want = want + (3 * A) ** 2 * np.einsum("tik,tjk->tij", H, H)
     np.testing.assert_allclose(b.residual_covariance(x, z, 3 * A, 5 * A), want,
                                rtol=1e-7, atol=1e-9 * A**2)
 

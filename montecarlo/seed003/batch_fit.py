@@ -116,7 +116,8 @@ def simulate_block(axis_az: float, axis_el: float, az: FloatArray, el: FloatArra
     ref_az = np.array([az_center, float(ref.roll_mirror_azimuth(az_center, side))])
     all_az, all_el = np.concatenate([ref_az, az]), np.concatenate([np.zeros(2), el])
     k = m + 2 if reference_rows else m
-    draws = rng.standard_normal((n, m + 2 + k * (5 if with_roll else 4)))
+    families = 5 if with_roll else 4
+    draws = rng.standard_normal((n, m + 2 + k * families + (0 if reference_rows else 4)))
     rolls = noise.mount_roll * draws[:, :m + 2]
     if reference_rows:
         heading, pitch, roll = attitude_angles(
@@ -124,11 +125,13 @@ def simulate_block(axis_az: float, axis_el: float, az: FloatArray, el: FloatArra
         heading = wrap(heading + frame_heading)
         t_az, t_el = all_az, all_el
     else:
+        scale = np.array([noise.ins_heading, noise.ins_pitch] * 2)
         heading, pitch, roll = ref.relative_readings(
             axis_az, axis_el, az, el, rolls[:, 2:], (az_center, 0.0, rolls[:, :1]),
-            (ref_az[1], 0.0, rolls[:, 1:2]), side)
+            (ref_az[1], 0.0, rolls[:, 1:2]), side,
+            reference_error=scale * draws[:, None, -4:])
         t_az, t_el = az, el
-    e = [draws[:, m + 2 + j * k:m + 2 + (j + 1) * k] for j in range(5 if with_roll else 4)]
+    e = [draws[:, m + 2 + j * k:m + 2 + (j + 1) * k] for j in range(families)]
     return BatchData(
         theodolite_az=wrap(t_az + noise.theodolite * e[0]),
         theodolite_el=t_el + noise.theodolite * e[1],
@@ -184,8 +187,9 @@ class _Batch:
         self.x_own = [(0, -1)] * mdl.n_core + [(0, j if free_roll else -1) for j in
                                                (pointing if free_roll else [-1] * mdl.n_prior)]
 
-    def residuals(self, x: FloatArray, z: FloatArray) -> FloatArray:
-        return self.model.residuals(x, z)
+    def residuals(self, x: FloatArray, z: FloatArray,
+                  reference_error: FloatArray | None = None) -> FloatArray:
+        return self.model.residuals(x, z, reference_error)
 
     def _differences(self, own: list[tuple[int, int]], columns: NDArray[np.intp],
                      evaluate: Callable[[FloatArray], FloatArray]) -> FloatArray:
@@ -230,7 +234,11 @@ class _Batch:
         G = self._differences(self.z_own, np.arange(z.shape[-1]), lambda steps: self.residuals(
             x[:, None, :], z[:, None, :] + steps))
         s = np.where(self.model.is_ins, sigma_ins, sigma_theodolite)
-        return (G * s**2) @ np.swapaxes(G, 1, 2)
+        cov = (G * s**2) @ np.swapaxes(G, 1, 2)
+        if not self.model.data.has_reference:
+            H = self.model.reference_error_columns(x, z)
+            cov = cov + sigma_ins**2 * (H @ np.swapaxes(H, 1, 2))
+        return cov
 
 
 def _levenberg_marquardt(fun: Callable[[FloatArray, NDArray[np.intp]], FloatArray],

@@ -19,7 +19,9 @@ direction of the offset in the (gamma, lambda) plane is fixed by the prior on th
 
 The fit is generalised least squares: the residual covariance is propagated from the reading
 errors (INS ``sigma_ins`` per heading, pitch and roll read; theodolite ``sigma_theodolite`` per
-angle), which correlates residuals through the reference rows.
+angle), which correlates residuals through the reference rows. Relative readings carry, unseen,
+the errors of the INS's heading and pitch at the two reference pointings, from which it built
+its reference: they are propagated too, and correlate every residual of the calibration.
 
 References
 ----------
@@ -159,7 +161,7 @@ class _Model:
         frame = ref.frame_from_axes(axis[..., c, :], axis[..., r, :], self.side)
         return azimuth_elevation(np.matmul(axis[..., self.k, :], frame))
 
-    def predicted(self, x, z):
+    def predicted(self, x, z, reference_error=None):
         g = self._split(z)
         x = np.asarray(x, float)
         gamma, lam = x[..., 0, None], x[..., 1, None]
@@ -190,14 +192,26 @@ class _Model:
             mirror = (ref.roll_mirror_azimuth(az_c, self.side), 0.0, roll_r)
             az_k, el_k = g["theodolite_az"], g["theodolite_el"]
         heading, pitch, _ = ref.relative_readings(gamma, lam, az_k, el_k, roll_k, center, mirror,
-                                                  self.side, roll_rel)
+                                                  self.side, roll_rel, reference_error)
         return heading, pitch
 
-    def residuals(self, x, z):
-        """Reading minus model, (..., 2m) [rad]: headings then pitches."""
+    def residuals(self, x, z, reference_error=None):
+        """Reading minus model, (..., 2m) [rad]: headings then pitches. ``reference_error``
+        (..., 4): the INS's heading and pitch errors at the reference pointings (relative data;
+        see :func:`montecarlo.seed003.reference.relative_readings`)."""
         h_obs, p_obs = self.observed(z)
-        h, p = self.predicted(x, z)
+        h, p = self.predicted(x, z, reference_error)
         return np.concatenate([wrap(h_obs - h), p_obs - p], axis=-1)
+
+    def reference_error_columns(self, x, z):
+        """(..., 2m, 4) central differences of the residuals over the errors of the INS's
+        heading and pitch at the two reference pointings, which relative readings carry unseen
+        (:func:`montecarlo.seed003.reference.relative_readings`); x, z as for the residuals."""
+        E = _STEP * np.eye(4)
+        steps = np.concatenate([E, -E])[:, None, :]
+        x, z = np.asarray(x, float), np.asarray(z, float)
+        r = self.residuals(x[..., None, :], z[..., None, :], steps)
+        return np.swapaxes(r[..., :4, :] - r[..., 4:, :], -1, -2) / (2 * _STEP)
 
     def prior(self, x):
         return np.asarray(x)[..., self.n_core:] / self.roll_sigma
@@ -211,13 +225,18 @@ class _Model:
         return (r[:p] - r[p:]).T / (2 * _STEP)
 
     def residual_covariance(self, x, sigma_ins, sigma_theodolite):
-        """Covariance of the 2m residuals propagated from the reading errors [rad^2]."""
+        """Covariance of the 2m residuals propagated from the reading errors [rad^2]: those in
+        the data and, for relative readings, the INS's at the two reference pointings."""
         q = self.z0.size
         steps = _STEP * np.eye(q)
         r = self.residuals(x, np.concatenate([self.z0 + steps, self.z0 - steps]))
         G = (r[:q] - r[q:]).T / (2 * _STEP)
         s = np.where(self.is_ins, sigma_ins, sigma_theodolite)
-        return (G * s**2) @ G.T
+        cov = (G * s**2) @ G.T
+        if not self.data.has_reference:
+            H = self.reference_error_columns(x, self.z0)
+            cov = cov + sigma_ins**2 * (H @ H.T)
+        return cov
 
 
 def _start(model: _Model) -> FloatArray:
@@ -403,7 +422,9 @@ def simulate_procedure(axis_az: float, axis_el: float, az: ArrayLike, el: ArrayL
     two reference mirrors (first) and the measured ones, with absolute readings; without, only the
     measured mirrors, read relative to the reference (exact :func:`relative_readings`). Each
     reading gets its error: theodolite ``noise.theodolite``, INS heading/pitch/roll
-    ``noise.ins_heading``/``ins_pitch``/``ins_roll``.
+    ``noise.ins_heading``/``ins_pitch``/``ins_roll``; relative readings also those of the INS's
+    heading and pitch at the two reference pointings, from which it built its reference (drawn
+    last).
     """
     rng = np.random.default_rng(rng)
     az, el = np.asarray(az, float), np.asarray(el, float)
@@ -411,23 +432,25 @@ def simulate_procedure(axis_az: float, axis_el: float, az: ArrayLike, el: ArrayL
     ref_az = np.array([az_center, float(ref.roll_mirror_azimuth(az_center, side))])
     all_az, all_el = np.concatenate([ref_az, az]), np.concatenate([np.zeros(2), el])
     rolls = noise.mount_roll * rng.standard_normal(m + 2)
+    k = m + 2 if reference_rows else m
+    e = rng.standard_normal((5 if with_roll else 4, k))
     if reference_rows:
         heading, pitch, roll = attitude_angles(
             ref.attitude_at(axis_az, axis_el, all_az, all_el, rolls))
         heading = wrap(heading + frame_heading)
         t_az, t_el = all_az, all_el
     else:
+        scale = np.array([noise.ins_heading, noise.ins_pitch] * 2)
         heading, pitch, roll = ref.relative_readings(
             axis_az, axis_el, az, el, rolls[2:], (az_center, 0.0, rolls[0]),
-            (ref_az[1], 0.0, rolls[1]), side)
+            (ref_az[1], 0.0, rolls[1]), side, reference_error=scale * rng.standard_normal(4))
         t_az, t_el = az, el
-    k = t_az.size
     return ProcedureData(
-        theodolite_az=wrap(t_az + noise.theodolite * rng.standard_normal(k)),
-        theodolite_el=t_el + noise.theodolite * rng.standard_normal(k),
-        ins_az=wrap(heading + noise.ins_heading * rng.standard_normal(k)),
-        ins_el=pitch + noise.ins_pitch * rng.standard_normal(k),
-        ins_roll=roll + noise.ins_roll * rng.standard_normal(k) if with_roll else None,
+        theodolite_az=wrap(t_az + noise.theodolite * e[0]),
+        theodolite_el=t_el + noise.theodolite * e[1],
+        ins_az=wrap(heading + noise.ins_heading * e[2]),
+        ins_el=pitch + noise.ins_pitch * e[3],
+        ins_roll=roll + noise.ins_roll * e[4] if with_roll else None,
         center=0 if reference_rows else None, roll_mirror=1 if reference_rows else None)
 
 

@@ -107,7 +107,7 @@ def reference_frame(C_center: ArrayLike, C_roll: ArrayLike, side: float = 1.0) -
 def relative_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, el: ArrayLike,
                       roll: ArrayLike, center: tuple[ArrayLike, ArrayLike, ArrayLike],
                       roll_mirror: tuple[ArrayLike, ArrayLike, ArrayLike], side: float = 1.0,
-                      roll_is_relative: bool = False
+                      roll_is_relative: bool = False, reference_error: ArrayLike | None = None
                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Exact INS readings (heading, pitch, roll relative to ``R``) at the measured mirrors.
 
@@ -127,6 +127,11 @@ def relative_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, el:
         Theodolite angles of the central and the roll reference mirror and the INS's absolute
         roll at those pointings; shaped like ``axis_az``.
     side : +1 (roll mirror on the right, as the text states) or -1 (left).
+    reference_error : array_like, shape (..., 4) [rad], optional
+        Errors of the INS's heading and pitch readings at the central, then at the roll
+        reference pointing, the leading shape like ``axis_az``'s. The INS builds ``R`` from the
+        axes it read there, ``direction(heading + e_h, pitch + e_p)``, so these errors enter
+        every relative reading of the calibration alike. None: read without error.
 
     Returns
     -------
@@ -136,8 +141,16 @@ def relative_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, el:
     ----------
     seed 003, section 3.2 (the procedure); docs/collimation.md ("The paper's procedure").
     """
-    C_R = reference_frame(attitude_at(axis_az, axis_el, *center),
-                          attitude_at(axis_az, axis_el, *roll_mirror), side)
+    C_c = attitude_at(axis_az, axis_el, *center)
+    C_r = attitude_at(axis_az, axis_el, *roll_mirror)
+    if reference_error is None:
+        C_R = reference_frame(C_c, C_r, side)
+    else:
+        e = np.asarray(reference_error, float)
+        read = [direction(*(angle + e[..., 2 * j + i] for i, angle in
+                            enumerate(azimuth_elevation(C[..., :, 1]))))
+                for j, C in enumerate((C_c, C_r))]
+        C_R = frame_from_axes(read[0], read[1], side)
     if roll_is_relative:
         w = np.matmul(_t(C_R), direction(az, el)[..., None])[..., 0]
         heading, pitch = autocollimate(direction(axis_az, axis_el), w, roll)
