@@ -147,9 +147,10 @@ def relative_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, el:
         C_R = reference_frame(C_c, C_r, side)
     else:
         e = np.asarray(reference_error, float)
-        read = [direction(*(angle + e[..., 2 * j + i] for i, angle in
-                            enumerate(azimuth_elevation(C[..., :, 1]))))
-                for j, C in enumerate((C_c, C_r))]
+        read = []
+        for j, C in enumerate((C_c, C_r)):
+            heading, pitch = azimuth_elevation(C[..., :, 1])  # of the INS axis there
+            read.append(direction(heading + e[..., 2 * j], pitch + e[..., 2 * j + 1]))
         C_R = frame_from_axes(read[0], read[1], side)
     if roll_is_relative:
         w = np.matmul(_t(C_R), direction(az, el)[..., None])[..., 0]
