@@ -49,7 +49,11 @@ def test_bench_quick_json_has_every_figure():
         assert s["bound_fraction"] == pytest.approx(s["bound_ns_per_trial"] / s["ns_per_trial"])
     assert r["roofline"]["total_ns_per_trial"] == pytest.approx(
         sum(s["ns_per_trial"] for s in stages), rel=0.2)  # medians of each, not of the sum
-    assert "roofline of the fused ground path" in subprocess.run(
+    floor = r["roofline"]["floor_ns_per_trial"]
+    assert floor == pytest.approx(sum(s["bound_ns_per_trial"] for s in stages), rel=1e-12)
+    assert r["roofline"]["floor_speedup"] == pytest.approx(
+        r["roofline"]["total_ns_per_trial"] / floor, rel=1e-12)
+    assert "every stage at its binding ceiling" in subprocess.run(
         [sys.executable, "-c", "from montecarlo.tools.bench import format_bench; import json, "
          "sys; print(format_bench(json.load(sys.stdin)))"], input=out.stdout,
         capture_output=True, text=True, check=True).stdout

@@ -160,7 +160,10 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
     per trial alone, and the accumulation's histogram increments alone (the bins of the same
     metric values, into histogram rows of the same size, in the same order). ``bound`` is
     the larger of a stage's ceilings (the one that binds; the ceiling itself for the draws
-    and the metrics), ``bound_fraction`` = bound / stage.
+    and the metrics), ``bound_fraction`` = bound / stage. ``floor_ns_per_trial`` is the sum of
+    the stages' bounds: the time of a trial with every stage at its binding ceiling, and
+    ``floor_speedup`` = total / floor the most that rearranging these operations can gain
+    (beyond it takes other operations: another generator, other metric functions).
     """
     from montecarlo.seed000 import ground_kernel as gk
     from montecarlo.systems.ground import STAGES, _scratch
@@ -276,6 +279,8 @@ def ground_roofline(n: int, repeats: int) -> dict[str, Any]:
                               "bound": bound_what, "bound_ns_per_trial": bound,
                               "bound_fraction": bound / stage if stage > 0 else float("nan")})
     out["total_ns_per_trial"] = statistics.median(spent["total"]) * scale
+    out["floor_ns_per_trial"] = sum(s["bound_ns_per_trial"] for s in out["stages"])
+    out["floor_speedup"] = out["total_ns_per_trial"] / out["floor_ns_per_trial"]
     return out
 
 
@@ -300,6 +305,8 @@ def format_roofline(r: dict[str, Any]) -> list[str]:
             lines.append(f"  {s['stage']:<13}{s['ns_per_trial']:>9.1f}{'':>7}  "
                          f"{s['bound_ns_per_trial']:>16.1f}{100 * s['bound_fraction']:>8.0f}%  "
                          f"{s['bound']}")
+    lines.append(f"  every stage at its binding ceiling: {r['floor_ns_per_trial']:.1f} ns/trial, "
+                 f"at most {r['floor_speedup']:.2f}x faster with these operations")
     return lines
 
 
