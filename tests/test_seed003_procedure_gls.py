@@ -60,15 +60,17 @@ class Independent:
         self.n_core = 2 if self.rows else 3
         self.n = self.n_core + n_rolls
 
-    def _in_frame(self, a_c, a_r, v):
-        """Heading and pitch of the directions ``v`` in the frame of the axes ``a_c``, ``a_r``
-        (Gram-Schmidt)."""
+    def _frame(self, a_c, a_r):
+        """Columns x, y, z of the frame of the axes ``a_c``, ``a_r`` (Gram-Schmidt)."""
         y = a_c
         x = a_r - np.sum(a_r * y, axis=-1, keepdims=True) * y
         x = self.side * x / np.linalg.norm(x, axis=-1, keepdims=True)
-        z = np.cross(x, y)
-        return (np.arctan2(np.sum(v * x, -1), np.sum(v * y, -1)),
-                np.arcsin(np.sum(v * z, -1)))
+        return np.stack([x, y, np.cross(x, y)], axis=-1)
+
+    def _in_frame(self, a_c, a_r, v):
+        """Heading and pitch of the directions ``v`` in the frame of the axes ``a_c``, ``a_r``."""
+        c = np.matmul(v[..., None, :], self._frame(a_c, a_r))[..., 0, :]
+        return np.arctan2(c[..., 0], c[..., 1]), np.arcsin(c[..., 2])
 
     def observed(self, r):
         if not self.rows:
@@ -102,10 +104,8 @@ class Independent:
                 moved[j // 2][j % 2] += sgn * step
                 a_c, a_r = (_unit(*angles) for angles in moved)
                 if self.roll == "recorded":
-                    frame = np.stack([a_r - (a_r @ a_c) * a_c, a_c], axis=-1)
-                    frame[:, 0] *= self.side / np.linalg.norm(frame[:, 0])
-                    frame = np.column_stack([frame, np.cross(frame[:, 0], frame[:, 1])])
-                    heading, pitch = autocollimate(_unit(g, lam), w @ frame, relative_roll)
+                    heading, pitch = autocollimate(_unit(g, lam), w @ self._frame(a_c, a_r),
+                                                   relative_roll)
                 else:
                     heading, pitch = self._in_frame(a_c, a_r, v)
                 pair.append(np.concatenate([heading, pitch]))
