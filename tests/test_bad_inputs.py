@@ -765,7 +765,9 @@ class ForkedCli:
     """One ``tests/forked_cli.py`` server: ``python -m montecarlo`` with its imports done."""
 
     def __init__(self) -> None:
-        env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1"}
+        # one BLAS thread: no BLAS thread pool in the server when it forks
+        env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1",
+               "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
         self.server = subprocess.Popen([sys.executable, str(SERVER)], stdin=subprocess.PIPE,
                                        stdout=subprocess.PIPE, text=True, env=env)
 
