@@ -95,6 +95,26 @@ def test_reference_reading_errors_build_the_frame_from_the_axes_read(side):
         assert ref.wrap(h1 - h0) == pytest.approx(-e[0], rel=0.1)
 
 
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_reference_reading_errors_to_first_order(side):
+    """No offsets, level mount, horizontal mirrors at alpha = az - az_c: an error e read at C or
+    R moves the readings by heading -e_hC, pitch -e_pC cos(alpha) - s e_pR sin(alpha)
+    (docs/collimation.md, "The reference's own errors"); e_hR moves nothing to first order (the
+    roll mirror only sets the frame's x direction about y_R). Differences over 1e-7 rad."""
+    az, el, az_c, step = np.array([-0.5, 0.2, 0.8, 2.0]), np.zeros(4), 0.1, 1e-7
+    alpha = az - az_c
+    args = (0.0, 0.0, az, el, 0.0, (az_c, 0.0, 0.0), (az_c + side * math.pi / 2, 0.0, 0.0), side)
+    h0, p0, _ = ref.relative_readings(*args)
+    want = {0: (-np.ones(4), np.zeros(4)), 1: (np.zeros(4), -np.cos(alpha)),
+            2: (np.zeros(4), np.zeros(4)), 3: (np.zeros(4), -side * np.sin(alpha))}
+    for j, (dh, dp) in want.items():
+        e = np.zeros(4)
+        e[j] = step
+        h, p, _ = ref.relative_readings(*args, reference_error=e)
+        np.testing.assert_allclose(ref.wrap(h - h0) / step, dh, atol=1e-6)
+        np.testing.assert_allclose((p - p0) / step, dp, atol=1e-6)
+
+
 def test_reference_mirrors_read_zero_and_frame_is_a_rotation():
     """At the central mirror the reading is heading 0, pitch 0; at the roll mirror pitch 0."""
     gamma, lam = 300 * A, -200 * A
