@@ -74,6 +74,24 @@ def test_noise_free_independent_data_give_the_offsets(tmp_path, case):
         assert fit.params["axis_el"] / ARCSEC == pytest.approx(lam, abs=0.01)
 
 
+def _relative_left(tmp_path, rng):
+    """One blind relative file (pitch to 60, level mount, roll mirror on the left, 2″ on every
+    reading; offsets uniform in 10-600″ with random signs), read as the command line reads it."""
+    gamma, lam = rng.uniform(10.0, 600.0, 2) * rng.choice([-1.0, 1.0], 2)
+    out, _ = cb.simulate(gamma, lam, roll_mirror_side="left", azimuth_sense="cw",
+                         mount_roll_sigma_deg=0.0, write_roll=False, reference_rows=False,
+                         theodolite_sigma_arcsec=2.0, ins_sigma_arcsec=2.0,
+                         pitch_elevations_deg=LAYOUTS["pitch to 60"], rng=rng)
+    cb.write_csv(tmp_path / "cal.csv", out)
+    return read_mirror_csv(tmp_path / "cal.csv", sets=SETS + REFERENCE_SETS)
+
+
+def _fit_left(mirrors):
+    """The procedure's fit on the left side with the known 2″ sigmas."""
+    return fit_procedure(procedure_data(mirrors), side=-1.0, sigma_ins=2.0 * ARCSEC,
+                         sigma_theodolite=2.0 * ARCSEC, before=False)
+
+
 def test_relative_readings_fit_with_chi2_near_one_on_independent_data(tmp_path):
     """Relative readings carry the errors of the INS's readings at the two reference mirrors,
     common to the set; the fit must weigh them. 80 sets of the blind simulator (pitch to 60,
@@ -83,15 +101,7 @@ def test_relative_readings_fit_with_chi2_near_one_on_independent_data(tmp_path):
     rng = np.random.default_rng(7)
     chi2 = []
     for _ in range(80):
-        gamma, lam = rng.uniform(10.0, 600.0, 2) * rng.choice([-1.0, 1.0], 2)
-        out, _ = cb.simulate(gamma, lam, roll_mirror_side="left", azimuth_sense="cw",
-                             mount_roll_sigma_deg=0.0, write_roll=False, reference_rows=False,
-                             theodolite_sigma_arcsec=2.0, ins_sigma_arcsec=2.0,
-                             pitch_elevations_deg=LAYOUTS["pitch to 60"], rng=rng)
-        cb.write_csv(tmp_path / "cal.csv", out)
-        data = procedure_data(read_mirror_csv(tmp_path / "cal.csv", sets=SETS + REFERENCE_SETS))
-        chi2.append(fit_procedure(data, side=-1.0, sigma_ins=2.0 * ARCSEC,
-                                  sigma_theodolite=2.0 * ARCSEC, before=False).chi2_red)
+        chi2.append(_fit_left(_relative_left(tmp_path, rng)).chi2_red)
     assert abs(np.mean(chi2) - 1.0) < 4 * np.sqrt(2 / 17 / 80), np.mean(chi2)
 
 
@@ -105,15 +115,8 @@ def test_the_fit_and_the_diagnosis_weigh_relative_readings_alike(tmp_path):
     offsets, about 1e-3)."""
     rng = np.random.default_rng(3)
     for _ in range(5):
-        gamma, lam = rng.uniform(10.0, 600.0, 2) * rng.choice([-1.0, 1.0], 2)
-        out, _ = cb.simulate(gamma, lam, roll_mirror_side="left", azimuth_sense="cw",
-                             mount_roll_sigma_deg=0.0, write_roll=False, reference_rows=False,
-                             theodolite_sigma_arcsec=2.0, ins_sigma_arcsec=2.0,
-                             pitch_elevations_deg=LAYOUTS["pitch to 60"], rng=rng)
-        cb.write_csv(tmp_path / "cal.csv", out)
-        mirrors = read_mirror_csv(tmp_path / "cal.csv", sets=SETS + REFERENCE_SETS)
-        fit = fit_procedure(procedure_data(mirrors), side=-1.0, sigma_ins=2.0 * ARCSEC,
-                            sigma_theodolite=2.0 * ARCSEC, before=False)
+        mirrors = _relative_left(tmp_path, rng)
+        fit = _fit_left(mirrors)
         base = fit_model(pe.procedure_problem(mirrors, math.hypot(2.0, 2.0) * ARCSEC, -1.0), ())
         assert base.chi2 == pytest.approx(fit.chi2, rel=5e-3)
         for key in ("axis_az", "axis_el"):
