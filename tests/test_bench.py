@@ -7,6 +7,8 @@ import sys
 
 import pytest
 
+from montecarlo.engine.runner import available_cores
+
 
 @pytest.mark.slow
 def test_bench_quick_json_has_every_figure():
@@ -27,9 +29,12 @@ def test_bench_quick_json_has_every_figure():
             ("stabilization_ratio", "stabilization_fast_trials_per_s",
              "stabilization_reference_trials_per_s")):
         assert r[ratio] == pytest.approx(r[top] / r[bottom], rel=1e-12), ratio
-    # (d) is the largest run of the scaling series
-    assert [s["trials"] for s in r["scaling"]] == [10**5, 10**6]
+    # (d) is the largest run of the scaling series; 10^6 trials stay in the calling process,
+    # 10^7 go to the workers, both on the fused kernel
+    assert [s["trials"] for s in r["scaling"]] == [10**6, 10**7]
     assert r["fast_trials_per_s_2core"] == r["scaling"][-1]["trials_per_s"]
+    cores = available_cores()  # the runner's default --n-jobs
+    assert [(s["kernel"], s["processes"]) for s in r["scaling"]] == [("fast", 1), ("fast", cores)]
     # memory: the polled peak of the 10^6-trial study; a process that imported numpy, pandas
     # and numba holds more than 50 MB (0 would mean it was never seen running)
     assert set(r["memory_by_trials"]) == {str(10**6)}

@@ -72,11 +72,12 @@ def kernel(request):
         yield request.param
 
 
-def _summary(study, tmp_path, kernel=None, **kw):
+def _summary(study, tmp_path, kernel=None, processes=None, **kw):
     ck = tmp_path / f"ck-{len(list(tmp_path.iterdir()))}"
     opts = RunOptions(progress=False, checkpoint_dir=ck, **kw)
     result = run_study(study, opts)
     assert kernel is None or result.kernel == kernel
+    assert processes is None or result.processes == processes
     return result.to_frame()
 
 
@@ -99,13 +100,28 @@ def test_small_studies_run_the_reference_path_large_ones_the_kernel(small_study)
     {"n_jobs": 1, "chunk_size": 3000},
 ])
 def test_bit_identical_for_any_jobs_and_chunks(small_study, kernel, reference, tmp_path, kw):
-    pd.testing.assert_frame_equal(_summary(small_study, tmp_path, kernel, **kw), reference,
-                                  check_exact=True)
+    got = _summary(small_study, tmp_path, kernel,
+                   processes=min(kw["n_jobs"], runner.available_cores()), **kw)
+    pd.testing.assert_frame_equal(got, reference, check_exact=True)
 
 
 def test_bit_identical_on_dask_local_cluster(small_study, kernel, reference, tmp_path):
-    got = _summary(small_study, tmp_path, kernel, n_jobs=2, backend="dask", chunk_size=1000)
+    got = _summary(small_study, tmp_path, kernel, processes=min(2, runner.available_cores()),
+                   n_jobs=2, backend="dask", chunk_size=1000)
     pd.testing.assert_frame_equal(got, reference, check_exact=True)
+
+
+def test_a_small_run_stays_in_the_calling_process_and_a_resumed_one_runs_nowhere(small_study,
+                                                                                 tmp_path,
+                                                                                 monkeypatch):
+    """Under the runner's threshold of work the trials run in the calling process even when
+    two workers are asked for, and the result records it; a rerun that finds every point in
+    its checkpoints runs no trials at all."""
+    monkeypatch.setattr(runner, "IN_PROCESS", math.inf)  # (the kernel fixture may lower it)
+    ck = tmp_path / "ck"
+    first = run_study(small_study, RunOptions(n_jobs=2, progress=False, checkpoint_dir=ck))
+    again = run_study(small_study, RunOptions(n_jobs=2, progress=False, checkpoint_dir=ck))
+    assert (first.processes, again.processes) == (1, 0)
 
 
 def test_seed_changes_results(small_study, reference, tmp_path):
@@ -258,6 +274,20 @@ def test_estimated_seconds_is_cost_per_trial_times_trials(small_study):
     per_trial = study.system.seconds_per_trial
     assert runner.estimated_seconds(study, [0, 1], False) == pytest.approx(2000 * per_trial)
     assert runner.estimated_seconds(study, [1], True) == pytest.approx(20 * 1000 * per_trial)
+
+
+@pytest.mark.parametrize("system", ["collimation", "stabilization"])
+def test_estimated_seconds_of_the_literal_path_use_its_own_cost(system):
+    """The trial-by-trial path of these systems costs tens of times their fast path; the plan
+    of a ``--reference`` run says so (it said the fast path's time)."""
+    from montecarlo.systems import study_from_dict
+
+    study = study_from_dict({"study": {"name": "e", "system": system, "trials": 100,
+                                       "seed": 1}}, "<test>")
+    fast, literal = (runner.estimated_seconds(study, [0], r) for r in (False, True))
+    assert fast == pytest.approx(100 * study.system.seconds_per_trial)
+    assert literal == pytest.approx(100 * study.system.reference_seconds_per_trial)
+    assert literal > 10 * fast
 
 
 @pytest.mark.parametrize(("seconds", "text"), [

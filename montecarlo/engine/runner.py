@@ -78,6 +78,10 @@ class StudyResult:
     """Grid points taken from checkpoints (``points``) and where (``from``, ``key``)."""
     kernel: str = "reference"
     """``"fast"`` if the system's compiled kernel computed the trials, else ``"reference"``."""
+    processes: int | None = 1
+    """Processes the trials of this run ran on: 1 in the calling process (a small run, or
+    ``n_jobs`` 1), else the workers started for it; 0 if every point was resumed or reused;
+    None on a dask scheduler given by address (its workers are not counted)."""
     nominal: dict[int, dict[tuple[str, str], float]] | None = None
     """Per grid point, each (variant, metric) in the nominal case [SI units, radians]
     (:mod:`.nominal`); computed on first use."""
@@ -273,8 +277,8 @@ compiled kernel, whose loading costs more (the two agree to about 1e-12)."""
 def estimated_seconds(study: Study, points: list[int], reference: bool) -> float:
     """Rough single-core time of the trials of ``points`` (the system's cost per trial)."""
     per_trial = getattr(study.system, "seconds_per_trial", 1e-3)
-    if reference and hasattr(study.system, "accumulate_block"):
-        per_trial *= 20.0  # the literal reference path instead of the fused kernel
+    if reference:
+        per_trial = getattr(study.system, "reference_seconds_per_trial", None) or per_trial
     return per_trial * sum(study.points[p].trials for p in points)
 
 
@@ -412,7 +416,10 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     trials = {p: _trials_frame(study, p, done[p][1]) for p in done if done[p][1]}
     origin = {"points": resumed, "from": str(checkpoints.dir), "key": checkpoints.key} \
         if resumed and checkpoints is not None else {}
-    return StudyResult(study, points, trials, origin, "reference" if reference else "fast")
+    processes = 0 if not todo else 1 if in_process else \
+        None if options.scheduler else options.n_jobs
+    return StudyResult(study, points, trials, origin, "reference" if reference else "fast",
+                       processes=processes)
 
 
 DEFAULT_MAX_TRIALS = 1_048_576

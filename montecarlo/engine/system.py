@@ -67,5 +67,7 @@ class System(Protocol):
 
     seconds_per_trial: float
     """A rough cost of one trial on one core [s], for planning (in-process or in workers,
-    estimated times). Systems with a fused kernel may also have ``accumulate_block`` and
+    estimated times), on the path a run takes by default. A system whose literal path costs
+    more may say so in ``reference_seconds_per_trial`` [s] (used for ``--reference``). Systems
+    with a fused kernel may also have ``accumulate_block`` and
     ``first_use_note(prepared_list) -> str | None`` (a compile about to happen)."""

@@ -12,6 +12,14 @@ from montecarlo.engine.runner import StudyResult
 from montecarlo.output.plots import key_label, plot_metric
 
 
+def _where(result: StudyResult) -> str:
+    """Where the trials of a run ran, as recorded (nothing if not recorded)."""
+    n = result.processes
+    if n == 1:
+        return ", in the calling process"
+    return f", on {n} worker processes" if isinstance(n, int) and n > 1 else ""
+
+
 def markdown_table(frame: pd.DataFrame, floatfmt: str = ".4g") -> str:
     """A GitHub-flavoured Markdown table of a small frame."""
 
@@ -107,7 +115,7 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
         f"block size {study.block_size}; percentile intervals at {h.confidence:.0%} confidence",
         "- trials computed by the " + ("fast path (tested equal to the literal one)"
                                        if result.kernel == "fast" else
-                                       "literal reference implementation"),
+                                       "literal reference implementation") + _where(result),
         f"- study hash `{provenance['study_hash'][:16]}`; montecarlo "
         f"{provenance['package_version']}; commit `{provenance['git_commit']}`",
         "", "## Assumptions", "",

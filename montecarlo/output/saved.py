@@ -78,5 +78,6 @@ def load_result(path: str | Path) -> tuple[StudyResult, pd.DataFrame, dict[str, 
                                                                    sort=False)}
         points.append(PointResult(rows, hist))
     result = StudyResult(study, points, resumed=prov.get("resumed") or {},
-                         kernel=prov.get("kernel", "reference"))
+                         kernel=prov.get("kernel", "reference"),
+                         processes=prov.get("processes"))
     return result, summary, prov

@@ -52,6 +52,8 @@ class ParamSystem:
     metrics : the metrics to aggregate, with display units.
     default_block_size : trials per block (small for expensive trials).
     seconds_per_trial : rough cost of one trial on one core [s], for planning.
+    reference_seconds_per_trial : the same on the literal path (``has_reference_path``) [s];
+        None: the same as ``seconds_per_trial``.
     limits : parameter -> (lowest, highest) allowed, in the study-file unit (None: open), so
         that a value no trial could use is refused when the study is loaded.
     choices : parameter -> the texts a text parameter may take.
@@ -69,6 +71,7 @@ class ParamSystem:
     metrics_: tuple[Metric, ...]
     default_block_size: int = 256
     seconds_per_trial: float = 1e-3
+    reference_seconds_per_trial: float | None = None
     limits: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     choices: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     presets: Mapping[str, Mapping[str, float]] = field(default_factory=dict)

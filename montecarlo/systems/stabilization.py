@@ -206,7 +206,8 @@ STABILIZATION = ParamSystem(
         Metric("residual_rms", "image residual RMS per axis", "px", 1.0),
         Metric("aim_error", "aim point error", "px", 1.0),
     ),
-    seconds_per_trial=0.05,
+    seconds_per_trial=0.015,  # compiled kernels, 60 s at 100 Hz: 134 trials/s on 2 cores
+    reference_seconds_per_trial=0.3,  # the literal numpy path: 6.7 trials/s on 2 cores
     default_block_size=32,
     limits={"duration": (1.0, 3600.0), "rate": (1.0, 10000.0),
             "misalignment_min": (0.0, 10.0), "misalignment_max": (0.0, 10.0),

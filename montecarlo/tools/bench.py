@@ -8,12 +8,14 @@ metrics; the runner paths include the streaming statistics.
 
 (a) a Python loop of single trials through the literal reference, (b) the vectorised literal
 reference (one block at a time, with streaming statistics), (c) the fused kernel on one core,
-(d) the fused kernel through the study runner on two cores (loky). Each figure is the median of
-``repeats`` timed runs in this invocation, after one untimed warm-up.
+(d) the fused kernel through the study runner on two cores (loky; at 10^7 trials or more,
+since below about that the runner keeps a ground study in the calling process; each row says
+how it ran). Each figure is the median of ``repeats`` timed runs in this invocation, after one
+untimed warm-up.
 
 Seed 001 stabilisation beside them: trials of the base point of ``studies/stabilization.toml``
-(simulate a 60 s run at 100 Hz, estimate by RLS, rerun compensated) through the runner on two
-cores, (e) with the literal numpy functions (``reference=True``), (f) with the compiled
+(simulate a 60 s run at 100 Hz, estimate by RLS, rerun compensated) through the runner on one
+core, (e) with the literal numpy functions (``reference=True``), (f) with the compiled
 kernels of :mod:`montecarlo.seed001.simulate_kernels` and
 :mod:`montecarlo.seed001.estimate_kernels`; timed in alternation, median of ``min(repeats, 3)``
 runs each.
@@ -22,7 +24,6 @@ runs each.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import os
 import statistics
@@ -41,7 +42,6 @@ from montecarlo.engine.distributions import Streams
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
-from montecarlo.systems.stabilization import STABILIZATION, run_trials
 
 WORKLOAD = {
     "study": {"name": "bench", "system": "ground", "trials": 1, "seed": 1},
@@ -310,11 +310,24 @@ def format_roofline(r: dict[str, Any]) -> list[str]:
     return lines
 
 
-def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> float:
-    """(d) trials per second through run_study on ``n_jobs`` loky workers."""
+def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> dict[str, Any]:
+    """(d) trials per second through run_study (``n_jobs`` as the CLI's ``--n-jobs``), and how
+    the runner ran them: ``kernel`` (``"fast"`` or ``"reference"``) and ``processes`` (1 in the
+    calling process). The runner decides both from the study's size, so a small study runs
+    the literal path or stays in the calling process however many cores there are."""
     study = _study(n)
     options = RunOptions(n_jobs=n_jobs, progress=False)  # no checkpoints: each run afresh
-    return _median_rate(lambda: run_study(study, options), n, repeats)
+    ran: list[Any] = []
+    rate = _median_rate(lambda: ran.append(run_study(study, options)), n, repeats)
+    return {"trials": n, "trials_per_s": rate, "kernel": ran[-1].kernel,
+            "processes": ran[-1].processes}
+
+
+def runner_path(s: dict[str, Any]) -> str:
+    """How the runner ran one row of the scaling series, in words."""
+    path = "fused kernel" if s["kernel"] == "fast" else "literal reference"
+    n = s["processes"]
+    return f"{path}, in the calling process" if n == 1 else f"{path}, {n} worker processes"
 
 
 STABILIZATION_WORKLOAD = {
@@ -322,27 +335,23 @@ STABILIZATION_WORKLOAD = {
     "params": {"rock_amplitude_deg": 5.0, "duration_s": 60.0, "image_noise_px": 0.1,
                "gyro_noise_deg_per_root_h": 0.01},
 }
-STABILIZATION_REFERENCE = dataclasses.replace(
-    STABILIZATION, run_trials=functools.partial(run_trials, reference=True))
-"""The stabilisation system on the literal numpy path, for comparison."""
-
-
 def stabilization_rates(n_reference: int, n_fast: int, repeats: int, duration: float = 60.0
                         ) -> tuple[float, float]:
-    """(e), (f): stabilisation trials per second through run_study on the loky workers.
+    """(e), (f): stabilisation trials per second through run_study on one core, in the calling
+    process, on the literal path (``reference=True``) and on the compiled kernels.
 
     The two paths alternate (one warm-up each, then ``repeats`` timed pairs) so that a change
     of the host's load between them does not enter their ratio.
     """
     runs = []
-    for n, system in ((n_reference, STABILIZATION_REFERENCE), (n_fast, STABILIZATION)):
+    for n, reference in ((n_reference, True), (n_fast, False)):
         raw = {**STABILIZATION_WORKLOAD,
                "study": {**STABILIZATION_WORKLOAD["study"], "trials": n},
                "params": {**STABILIZATION_WORKLOAD["params"], "duration_s": duration}}
-        study = dataclasses.replace(study_from_dict(raw, "<bench>"), system=system)
-        runs.append(functools.partial(run_study, study, RunOptions(progress=False)))
+        options = RunOptions(n_jobs=1, progress=False, reference=reference)
+        runs.append(functools.partial(run_study, study_from_dict(raw, "<bench>"), options))
     for run in runs:
-        run()  # warm-up: compilation, caches, worker pool
+        run()  # warm-up: compilation, caches
     times: list[list[float]] = [[], []]
     for _ in range(repeats):
         for run, spent in zip(runs, times, strict=True):
@@ -420,19 +429,21 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     """All figures of the benchmark.
 
     ``quick`` (what ``make bench`` runs, under 30 s on two quiet cores): the roofline and every
-    row at small sizes, the runner scaling at 10^5 and 10^6 trials, the memory of one 10^6-trial
-    study, no cold-cache compile. Otherwise (``--full``) the sizes of the full benchmark:
-    scaling up to 10^8 trials, memory at 10^4 and 10^8, the compile time with an empty cache.
+    row at small sizes, the runner scaling at 10^6 and 10^7 trials (below about 10^7 the runner
+    keeps a ground study in the calling process: row (d) is the 10^7 run, on the workers), the
+    memory of one 10^6-trial study, no cold-cache compile. Otherwise (``--full``) the sizes of
+    the full benchmark: scaling up to 10^8 trials, memory at 10^4 and 10^8, the compile time
+    with an empty cache.
     """
     started, load_before = time.perf_counter(), list(os.getloadavg())
     probe_before = host_probe()
     big = 10**6 if quick else 10**8
-    sizes = [10**5, 10**6] if quick else [10**k for k in range(4, 9)]
+    sizes = [10**6, 10**7] if quick else [10**k for k in range(4, 9)]
     roofline = ground_roofline(2**20 if quick else 2**23, repeats)
     naive = naive_rate(200 if quick else 2000, repeats)
     reference = _block_rate(2**16 if quick else 2**18, repeats, fast=False)
     fast1 = _block_rate(2**20 if quick else 2**22, repeats, fast=True)
-    scaling = [{"trials": n, "trials_per_s": runner_rate(n, repeats)} for n in sizes]
+    scaling = [runner_rate(n, repeats) for n in sizes]
     fast2 = scaling[-1]["trials_per_s"]
     memory = {n: study_memory(n) for n in ((big,) if quick else (sizes[0], big))}
     duration = 5.0 if quick else 60.0
@@ -475,8 +486,10 @@ def format_bench(r: dict[str, Any]) -> str:
     rows = [("(a) naive per-trial loop, literal reference", "naive_trials_per_s"),
             ("(b) vectorised literal reference, 1 core", "reference_trials_per_s"),
             ("(c) fused kernel, 1 core", "fast_trials_per_s_1core"),
-            ("(d) fused kernel through the runner, 2 cores", "fast_trials_per_s_2core")]
+            ("(d) through the runner: " + runner_path(r["scaling"][-1]),
+             "fast_trials_per_s_2core")]
     compiled = r["compile_seconds_cold_cache"]
+    width = max(46, *(len(label) + 1 for label, _ in rows))
     lines = [
         f"workload: {r['workload']}",
         f"median of {r['repeats']} runs each, {r['cpu_count']} CPUs, "
@@ -487,7 +500,7 @@ def format_bench(r: dict[str, Any]) -> str:
         "",
         *format_roofline(r["roofline"]),
         "",
-        *(f"{label:<46}{r[key]:>14,.0f} trials/s" for label, key in rows),
+        *(f"{label:<{width}}{r[key]:>14,.0f} trials/s" for label, key in rows),
         "",
         f"(d)/(a) = {r['ratio_2core_to_naive']:,.0f}x   (c)/(b) = "
         f"{r['ratio_1core_to_reference']:.1f}x   (d)/(c) = {r['ratio_2core_to_1core']:.2f}x",
@@ -501,16 +514,17 @@ def format_bench(r: dict[str, Any]) -> str:
         + " (a shared host's speed moves with its load; so do the rates above)",
         "",
         f"seed 001 stabilisation ({r['stabilization_duration_s']:.0f} s run at 100 Hz: "
-        "simulate, RLS estimate, compensated rerun), through the runner, 2 cores:",
+        "simulate, RLS estimate, compensated rerun), through the runner, 1 core:",
         f"{'(e) literal numpy reference':<46}{r['stabilization_reference_trials_per_s']:>14,.2f}"
         " trials/s",
         f"{'(f) compiled kernels':<46}{r['stabilization_fast_trials_per_s']:>14,.2f} trials/s",
         f"(f)/(e) = {r['stabilization_ratio']:.1f}x",
         "",
-        "scaling through the runner (2 cores):",
+        "scaling through the runner (it picks the path and the processes by the study's size):",
     ]
     for s in r["scaling"]:
-        lines.append(f"  {s['trials']:>12,} trials  {s['trials_per_s']:>14,.0f} trials/s")
+        lines.append(f"  {s['trials']:>12,} trials  {s['trials_per_s']:>14,.0f} trials/s  "
+                     f"({runner_path(s)})")
     for n, m in r["memory_by_trials"].items():
         lines.append(f"memory at {int(n):,} trials: largest process {m['max_process_rss_mb']:.0f}"
                      f" MB, tree RSS {m['tree_rss_mb']:.0f} MB, tree PSS {m['tree_pss_mb']:.0f} MB")
