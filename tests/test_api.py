@@ -66,7 +66,7 @@ def test_plot_report_and_figures(tmp_path):
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["kind"] == "run" and prov["study"] == "api-small"
     # 1000 trials: the literal path, in this process, as recorded and as reported
-    assert (prov["kernel"], prov["processes"]) == ("reference", 1)
+    assert (prov["kernel"], prov["workers"]) == ("reference", 0)
     assert ("trials computed by the literal reference implementation, in the calling process"
             in (out / "report.md").read_text())
     pd.testing.assert_frame_equal(pd.read_parquet(out / "summary.parquet"), result.summary)

@@ -10,6 +10,7 @@ import jsonschema
 import pytest
 
 import montecarlo
+from montecarlo.engine.runner import available_cores
 from montecarlo.systems import REGISTRY
 
 ROOT = Path(__file__).parent.parent
@@ -29,6 +30,19 @@ def test_validate_states_grid_trials_time_and_spec():
     assert "64, 20,000 per point, 120,384 in all; 6 enumerate their worst-case corners" \
         in out.stdout
     assert "on 1 core" in out.stdout and "spec: max of table1_angle <= 3 mrad" in out.stdout
+
+
+def test_validate_plans_the_cores_the_run_takes():
+    """A small study stays in the calling process however many workers are asked for, as the
+    run records; the layout study (about 36 s of single-core work) goes to the workers."""
+    small = ROOT / "studies" / "range_sizing.toml"
+    info = json.loads(cli("validate", small, "--trials", "50", "--n-jobs", "2",
+                          "--json").stdout)
+    ran = montecarlo.run(small, trials=50, n_jobs=2)
+    assert info["cores"] == 1 and ran._result.workers == 0
+    big = json.loads(cli("validate", ROOT / "studies" / "collimation_layout.toml", "--n-jobs",
+                         "2", "--json").stdout)
+    assert big["cores"] == min(2, available_cores())
 
 
 def test_validate_json_agrees_with_the_loaded_study():

@@ -72,12 +72,18 @@ def kernel(request):
         yield request.param
 
 
-def _summary(study, tmp_path, kernel=None, processes=None, **kw):
+def _workers(n_jobs):
+    """Loky workers a run asked for ``n_jobs`` gets (capped at the cores; one runs in process)."""
+    n = min(n_jobs, runner.available_cores())
+    return 0 if n == 1 else n
+
+
+def _summary(study, tmp_path, kernel=None, workers=None, **kw):
     ck = tmp_path / f"ck-{len(list(tmp_path.iterdir()))}"
     opts = RunOptions(progress=False, checkpoint_dir=ck, **kw)
     result = run_study(study, opts)
     assert kernel is None or result.kernel == kernel
-    assert processes is None or result.processes == processes
+    assert workers is None or result.workers == workers
     return result.to_frame()
 
 
@@ -100,13 +106,12 @@ def test_small_studies_run_the_reference_path_large_ones_the_kernel(small_study)
     {"n_jobs": 1, "chunk_size": 3000},
 ])
 def test_bit_identical_for_any_jobs_and_chunks(small_study, kernel, reference, tmp_path, kw):
-    got = _summary(small_study, tmp_path, kernel,
-                   processes=min(kw["n_jobs"], runner.available_cores()), **kw)
+    got = _summary(small_study, tmp_path, kernel, workers=_workers(kw["n_jobs"]), **kw)
     pd.testing.assert_frame_equal(got, reference, check_exact=True)
 
 
 def test_bit_identical_on_dask_local_cluster(small_study, kernel, reference, tmp_path):
-    got = _summary(small_study, tmp_path, kernel, processes=min(2, runner.available_cores()),
+    got = _summary(small_study, tmp_path, kernel, workers=min(2, runner.available_cores()),
                    n_jobs=2, backend="dask", chunk_size=1000)
     pd.testing.assert_frame_equal(got, reference, check_exact=True)
 
@@ -121,7 +126,7 @@ def test_a_small_run_stays_in_the_calling_process_and_a_resumed_one_runs_nowhere
     ck = tmp_path / "ck"
     first = run_study(small_study, RunOptions(n_jobs=2, progress=False, checkpoint_dir=ck))
     again = run_study(small_study, RunOptions(n_jobs=2, progress=False, checkpoint_dir=ck))
-    assert (first.processes, again.processes) == (1, 0)
+    assert (first.workers, again.workers) == (0, 0)
 
 
 def test_seed_changes_results(small_study, reference, tmp_path):
@@ -200,6 +205,27 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
 def _tiny(small_study, trials=1100):
     """The small study with ``trials`` per point: blocks of 500, the last one short."""
     return load_study(small_study.path, trials=trials)
+
+
+def test_planned_workers_are_the_workers_given_a_task(small_study, monkeypatch):
+    """One block of one point is one task: a second worker would stay idle, so one is
+    planned; two points of three blocks each make enough tasks for both; a run in the calling
+    process, or of no point, has none; a remote dask cluster's are not counted."""
+    monkeypatch.setattr(runner, "IN_PROCESS", 0.0)
+    one, six = _tiny(small_study, trials=500), _tiny(small_study)
+    two = RunOptions(n_jobs=2)
+    assert runner.planned_workers(one, [0], two, False) == 1
+    assert runner.planned_workers(six, [0, 1], two, False) == 2
+    assert runner.planned_workers(six, [0, 1], RunOptions(n_jobs=1), False) == 0
+    assert runner.planned_workers(six, [], two, False) == 0
+    remote = RunOptions(n_jobs=2, backend="dask", scheduler="tcp://h:8786")
+    assert runner.planned_workers(six, [0, 1], remote, False) is None
+    monkeypatch.setattr(runner, "IN_PROCESS", math.inf)
+    assert runner.planned_workers(six, [0, 1], two, False) == 0
+    assert runner.plan_text(10.0, 2) == "about 5 s on 2 cores"
+    assert runner.plan_text(0.4, 0) == "under a second on 1 core"
+    assert runner.plan_text(90.0, None) == \
+        "about 90 s of single-core work, on the dask cluster's workers"
 
 
 def test_tasks_cover_every_block_once_in_order(small_study):

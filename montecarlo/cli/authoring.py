@@ -23,9 +23,10 @@ from montecarlo.errors import InputError
 def _cmd_validate(args: argparse.Namespace) -> int:
     from montecarlo.engine.runner import (
         RunOptions,
-        about,
         checked_options,
         estimated_seconds,
+        plan_text,
+        planned_workers,
         uses_reference,
     )
     from montecarlo.systems import load_study
@@ -33,9 +34,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     check_json_option(args)
     study = load_study(args.study, trials=args.trials, max_points=args.max_points)
     options = checked_options(study, RunOptions(n_jobs=args.n_jobs))
-    cores = options.n_jobs or 1
     reference = uses_reference(study, options)
-    seconds = estimated_seconds(study, list(range(len(study.points))), reference)
+    points = list(range(len(study.points)))
+    seconds = estimated_seconds(study, points, reference)
+    workers = planned_workers(study, points, options, reference)
+    cores = max(workers or 1, 1)
     trials = [p.trials for p in study.points]
     h = study.header
     info: dict[str, Any] = {
@@ -58,8 +61,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     corners = f"; {info['enumerated_points']} enumerate their worst-case corners" \
         if info["enumerated_points"] else ""
     print(f"  trials: {each} per point, {sum(trials):,} in all{corners}")
-    print(f"  run time: {about(seconds / cores)} on {cores} "
-          f"{'core' if cores == 1 else 'cores'} ({info['kernel']} path)")
+    print(f"  run time: {plan_text(seconds, workers)} ({info['kernel']} path)")
     if study.spec is not None:
         s = study.spec
         print(f"  spec: {s.statistic} of {s.metric}{f' ({s.variant})' if s.variant else ''} "

@@ -78,10 +78,11 @@ class StudyResult:
     """Grid points taken from checkpoints (``points``) and where (``from``, ``key``)."""
     kernel: str = "reference"
     """``"fast"`` if the system's compiled kernel computed the trials, else ``"reference"``."""
-    processes: int | None = 1
-    """Processes the trials of this run ran on: 1 in the calling process (a small run, or
-    ``n_jobs`` 1), else the workers started for it; 0 if every point was resumed or reused;
-    None on a dask scheduler given by address (its workers are not counted)."""
+    workers: int | None = 0
+    """Worker processes the trials of this run ran on (:func:`planned_workers`): 0 in the
+    calling process (a small run, or ``n_jobs`` 1) or if no trial ran (every point resumed or
+    reused); None on a dask scheduler given by address (its workers are not counted). For
+    :func:`run_until_decided`, the most of any of its rounds."""
     nominal: dict[int, dict[tuple[str, str], float]] | None = None
     """Per grid point, each (variant, metric) in the nominal case [SI units, radians]
     (:mod:`.nominal`); computed on first use."""
@@ -282,6 +283,35 @@ def estimated_seconds(study: Study, points: list[int], reference: bool) -> float
     return per_trial * sum(study.points[p].trials for p in points)
 
 
+def in_calling_process(options: RunOptions, work: float) -> bool:
+    """Whether trials of ``work`` estimated seconds run in the calling process (``options``
+    checked): one worker asked for on loky, or too little work to pay for starting workers."""
+    return options.backend == "loky" and (options.n_jobs == 1 or work < IN_PROCESS)
+
+
+def planned_workers(study: Study, points: list[int], options: RunOptions,
+                    reference: bool) -> int | None:
+    """Worker processes the trials of ``points`` will run on (``options`` checked): 0 for no
+    points or in the calling process, else the workers given a task (at most ``n_jobs``; a
+    study of fewer tasks leaves the others idle); None on a dask scheduler given by address,
+    whose workers are not counted."""
+    if not points or in_calling_process(options, estimated_seconds(study, points, reference)):
+        return 0
+    if options.scheduler:
+        return None
+    chunk = _chunk_blocks(study, points, options)
+    tasks = sum(math.ceil(_n_blocks(study, p) / chunk) for p in points)
+    return min(options.n_jobs or 1, tasks)
+
+
+def plan_text(seconds: float, workers: int | None) -> str:
+    """How long and on how many cores (:func:`planned_workers`): 'about 18 s on 2 cores'."""
+    if workers is None:
+        return f"{about(seconds)} of single-core work, on the dask cluster's workers"
+    n = max(workers, 1)
+    return f"{about(seconds / n)} on {n} {'core' if n == 1 else 'cores'}"
+
+
 def uses_reference(study: Study, options: RunOptions) -> bool:
     """Whether the trials go through the literal reference path: asked for, or, for a system
     with a fused kernel, per-trial values kept or a study so small that loading the kernel
@@ -356,7 +386,8 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     total = sum(study.points[p].trials for p in todo)
     reference = uses_reference(study, options)
     work = estimated_seconds(study, todo, reference)
-    in_process = options.backend == "loky" and (options.n_jobs == 1 or work < IN_PROCESS)
+    in_process = in_calling_process(options, work)
+    workers = planned_workers(study, todo, options, reference)
     note = getattr(study.system, "first_use_note", None)
     if todo and note is not None and not reference:
         message = note([study.points[p].prepared for p in todo])
@@ -373,10 +404,8 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
             n_jobs = None if in_process or not todo \
                 else stack.enter_context(_backend(options, gone))
             if todo:
-                cores = 1 if in_process else (options.n_jobs or 1)
-                log.info("%s: %d of %d grid points to run, %s trials (%s on %d %s)",
-                         h.name, len(todo), len(study.points), f"{total:,}",
-                         about(work / cores), cores, "core" if cores == 1 else "cores")
+                log.info("%s: %d of %d grid points to run, %s trials (%s)", h.name, len(todo),
+                         len(study.points), f"{total:,}", plan_text(work, workers))
             bar = stack.enter_context(tqdm(
                 total=total, unit="trial", unit_scale=True, dynamic_ncols=True,
                 disable=not options.progress or not todo,
@@ -416,10 +445,8 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     trials = {p: _trials_frame(study, p, done[p][1]) for p in done if done[p][1]}
     origin = {"points": resumed, "from": str(checkpoints.dir), "key": checkpoints.key} \
         if resumed and checkpoints is not None else {}
-    processes = 0 if not todo else 1 if in_process else \
-        None if options.scheduler else options.n_jobs
     return StudyResult(study, points, trials, origin, "reference" if reference else "fast",
-                       processes=processes)
+                       workers=workers)
 
 
 DEFAULT_MAX_TRIALS = 1_048_576
@@ -456,6 +483,7 @@ def run_until_decided(study: Study, options: RunOptions,
                       reference=uses_reference(study, checked_options(study, options)))
     result = run_study(study, options)
     trials = dict(result.trials)
+    workers = [result.workers]
     while True:
         grow = {}
         for gp, pr in zip(study.points, result.points, strict=True):
@@ -470,13 +498,15 @@ def run_until_decided(study: Study, options: RunOptions,
         study = study.with_trials(grow)
         reuse = {p: pr for p, pr in enumerate(result.points) if p not in grow}
         result = run_study(study, options, reuse=reuse)
+        workers.append(result.workers)
         trials = {**{p: t for p, t in trials.items() if p not in grow}, **result.trials}
     left = [gp.index for gp, pr in zip(study.points, result.points, strict=True)
             if (pr.summary.get("verdict", pd.Series(dtype=str)) == "undecided").any()]
     if left:
         log.warning("%s: still undecided at %s trials: grid point(s) %s", study.header.name,
                     f"{max_trials:,}", ", ".join(map(str, left)))
-    return replace(result, trials=dict(sorted(trials.items())))
+    widest = None if None in workers else max(n for n in workers if n is not None)
+    return replace(result, trials=dict(sorted(trials.items())), workers=widest)
 
 
 def about(seconds: float) -> str:

@@ -75,13 +75,13 @@ def provenance(kind: str, **record: Any) -> dict[str, Any]:
 def study_provenance(result: Any, run_options: dict[str, Any]) -> dict[str, Any]:
     """Provenance of a study run: the study, its hash, seed and resolved form, how it was run
     (``run_options`` do not change results), which path computed the trials (``kernel``), on
-    how many processes (``processes``, see ``StudyResult``) and which points came from
+    how many worker processes (``workers``, see ``StudyResult``) and which points came from
     checkpoints. ``study_source`` (the study as given) lets
     ``montecarlo report`` build the study again."""
     study = result.study
     return provenance("run", study=study.header.name, study_hash=study.hash(),
                       seed=study.header.seed, run_options=run_options, kernel=result.kernel,
-                      processes=result.processes,
+                      workers=result.workers,
                       resumed=result.resumed or None, resolved_study=study.resolved(),
                       study_path=str(study.path), study_source=study.source,
                       point_trials=[gp.trials for gp in study.points])

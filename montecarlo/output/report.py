@@ -13,11 +13,12 @@ from montecarlo.output.plots import key_label, plot_metric
 
 
 def _where(result: StudyResult) -> str:
-    """Where the trials of a run ran, as recorded (nothing if not recorded)."""
-    n = result.processes
-    if n == 1:
-        return ", in the calling process"
-    return f", on {n} worker processes" if isinstance(n, int) and n > 1 else ""
+    """Where the trials of a run ran, as recorded (nothing if not recorded or none ran)."""
+    n = result.workers
+    if n is None or len(result.resumed.get("points", [])) == len(result.points):
+        return ""
+    return ", in the calling process" if n == 0 else \
+        f", on {n} worker process{'es' if n > 1 else ''}"
 
 
 def markdown_table(frame: pd.DataFrame, floatfmt: str = ".4g") -> str:

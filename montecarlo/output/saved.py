@@ -79,5 +79,5 @@ def load_result(path: str | Path) -> tuple[StudyResult, pd.DataFrame, dict[str, 
         points.append(PointResult(rows, hist))
     result = StudyResult(study, points, resumed=prov.get("resumed") or {},
                          kernel=prov.get("kernel", "reference"),
-                         processes=prov.get("processes"))
+                         workers=prov.get("workers"))
     return result, summary, prov

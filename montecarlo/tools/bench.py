@@ -312,7 +312,7 @@ def format_roofline(r: dict[str, Any]) -> list[str]:
 
 def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> dict[str, Any]:
     """(d) trials per second through run_study (``n_jobs`` as the CLI's ``--n-jobs``), and how
-    the runner ran them: ``kernel`` (``"fast"`` or ``"reference"``) and ``processes`` (1 in the
+    the runner ran them: ``kernel`` (``"fast"`` or ``"reference"``) and ``workers`` (0 in the
     calling process). The runner decides both from the study's size, so a small study runs
     the literal path or stays in the calling process however many cores there are."""
     study = _study(n)
@@ -320,14 +320,14 @@ def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> dict[str, An
     ran: list[Any] = []
     rate = _median_rate(lambda: ran.append(run_study(study, options)), n, repeats)
     return {"trials": n, "trials_per_s": rate, "kernel": ran[-1].kernel,
-            "processes": ran[-1].processes}
+            "workers": ran[-1].workers}
 
 
 def runner_path(s: dict[str, Any]) -> str:
     """How the runner ran one row of the scaling series, in words."""
     path = "fused kernel" if s["kernel"] == "fast" else "literal reference"
-    n = s["processes"]
-    return f"{path}, in the calling process" if n == 1 else f"{path}, {n} worker processes"
+    n = s["workers"]
+    return f"{path}, in the calling process" if n == 0 else f"{path}, {n} worker processes"
 
 
 STABILIZATION_WORKLOAD = {
@@ -520,7 +520,7 @@ def format_bench(r: dict[str, Any]) -> str:
         f"{'(f) compiled kernels':<46}{r['stabilization_fast_trials_per_s']:>14,.2f} trials/s",
         f"(f)/(e) = {r['stabilization_ratio']:.1f}x",
         "",
-        "scaling through the runner (it picks the path and the processes by the study's size):",
+        "scaling through the runner (it picks the path and the workers by the study's size):",
     ]
     for s in r["scaling"]:
         lines.append(f"  {s['trials']:>12,} trials  {s['trials_per_s']:>14,.0f} trials/s  "
