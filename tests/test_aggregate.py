@@ -417,6 +417,20 @@ def test_spec_on_the_magnitude_of_a_signed_metric():
         assert row["verdict"] == "meets" and row["spec_value"] == row[stat] > 2.8
 
 
+@pytest.mark.parametrize(("sign", "signed", "verdict"), [
+    (-1.0, True, "fails"), (1.0, True, "fails"), (-1.0, False, "meets")])
+def test_a_bias_of_either_sign_fails_a_mean_spec_on_a_signed_metric(sign, signed, verdict):
+    """Values 1..3, mean 2 (or -2), against mean <= 1: a signed metric's bias fails either
+    way; an unsigned metric's negative mean is below the limit."""
+    ps = agg.PointStats()
+    ps.add_block(0, {("v", "m"): sign * np.linspace(1.0, 3.0, 1000)}, {"v": {"total": 0}},
+                 1000)
+    row = ps.summary({"m": signed}, 0.95, agg.SpecCheck("m", None, "mean", 1.0)).iloc[0]
+    assert row["mean"] == pytest.approx(2.0 * sign, rel=1e-12)
+    assert row["verdict"] == verdict
+    assert row["spec_value"] == pytest.approx(2.0 if signed else 2.0 * sign, rel=1e-12)
+
+
 def test_verdict_at_the_limit_itself():
     """'At most the limit': an interval ending on the limit meets it; one starting on it does
     not fail it."""

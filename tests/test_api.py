@@ -72,6 +72,19 @@ def test_plot_report_and_figures(tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(out / "summary.parquet"), result.summary)
 
 
+def test_a_mean_spec_on_a_signed_metric_is_reported_as_the_bias_it_judges(tmp_path):
+    """The yaw error's mean is signed; the spec judges its magnitude and says so, in the
+    report's requirement, its table, and the summary's spec value."""
+    raw = {**SMALL, "spec": {"metric": "delta_psi", "statistic": "mean", "limit": 0.05},
+           "sweep": []}
+    result = montecarlo.run(raw, trials=1000)
+    row = result.summary[result.summary["metric"] == "delta_psi"].iloc[0]
+    assert row["spec_value"] == abs(row["mean"]) > 0
+    report = (result.report(tmp_path / "r") / "report.md").read_text()
+    assert "Requirement: abs(mean) of `delta_psi`" in report
+    assert "| abs(mean) (valid trials) | abs(mean) (all trials) |" in report
+
+
 def test_a_mistake_is_an_input_error_naming_the_key():
     bad = {**SMALL, "sensor": {"fov_deg": [90.0, 90.0], "pixels": [0, 512]}}
     with pytest.raises(InputError, match=r"sensor\.pixels"):

@@ -480,7 +480,8 @@ class PointStats:
             if not sampled:
                 lo = hi = value
         else:  # mean, std, max: no interval; any trial without a value fails the spec
-            value = math.inf if censored else row[stat]
+            # (a signed metric's mean by its magnitude: a bias of either sign counts)
+            value = math.inf if censored else abs(row[stat]) if of_abs else row[stat]
             lo = hi = value
         if math.isnan(value) and censored == 0:  # no trials
             verdict = "undecided"

@@ -91,8 +91,14 @@ class Spec(Strict):
     variant: str | None = None
     statistic: str = Field(default="p95",
                            pattern=r"^(mean|std|p50|p90|p95|p99|max|cvar[1-9][0-9]?)$")
-    """A percentile, mean, std, max, or ``cvarNN``: the mean of the worst (100 - NN) %."""
+    """A percentile, mean, std, max, or ``cvarNN``: the mean of the worst (100 - NN) %. Of a
+    signed (per-axis) metric, the percentiles, ``cvarNN`` and max are of its magnitude and the
+    mean is judged by its magnitude, the bias ``abs(mean)``."""
     limit: float = Field(gt=0)
+
+    def statistic_label(self, signed: bool) -> str:
+        """The statistic as judged: ``abs(mean)`` for the mean of a signed metric."""
+        return "abs(mean)" if signed and self.statistic == "mean" else self.statistic
 
 
 @dataclass(frozen=True)

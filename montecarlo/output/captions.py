@@ -35,9 +35,9 @@ def _spec_text(study: Study) -> str:
     s = study.spec
     if s is None:
         return ""
-    unit = study.metric(s.metric).unit
-    return (f" Spec: {s.statistic} of `{s.metric}`"
-            f"{' (' + s.variant + ')' if s.variant else ''} ≤ {s.limit:g} {unit}.")
+    m = study.metric(s.metric)
+    return (f" Spec: {s.statistic_label(m.signed)} of `{s.metric}`"
+            f"{' (' + s.variant + ')' if s.variant else ''} ≤ {s.limit:g} {m.unit}.")
 
 
 def figure_caption(result: StudyResult, name: str) -> str:

@@ -104,7 +104,8 @@ def _fmt(v: Any) -> str:
 def _spec_text(study: Study) -> str:
     s = study.spec
     assert s is not None
-    return f"spec: {s.statistic} ≤ {s.limit:g} {study.metric(s.metric).unit}"
+    m = study.metric(s.metric)
+    return f"spec: {s.statistic_label(m.signed)} ≤ {s.limit:g} {m.unit}"
 
 
 def _select(data: pd.DataFrame, keys: list[str], values: tuple) -> pd.DataFrame:

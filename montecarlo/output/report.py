@@ -53,9 +53,10 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
         return None
     sel = summary[summary["verdict"].notna()] if "verdict" in summary else summary.iloc[:0]
     stat = spec.statistic
+    judged = spec.statistic_label(study.metric(spec.metric).signed)
     out = sel[["point", *study.sweep_keys, "variant", "trials", "invalid_fraction"]].copy()
-    out[f"{stat} (valid trials)"] = sel[stat]
-    out[f"{stat} (all trials)"] = sel["spec_value"]
+    out[f"{judged} (valid trials)"] = sel[stat].abs() if judged != stat else sel[stat]
+    out[f"{judged} (all trials)"] = sel["spec_value"]
     if stat.startswith(("p", "cvar")):
         out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" if sampling == "random" else "exact"
                              for a, b, sampling in zip(sel["spec_lo"], sel["spec_hi"],
@@ -135,7 +136,8 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
         spec = study.spec
         assert spec is not None
         lines += ["", "## Spec", "",
-                  f"Requirement: {spec.statistic} of `{spec.metric}`"
+                  f"Requirement: {spec.statistic_label(study.metric(spec.metric).signed)} of "
+                  f"`{spec.metric}`"
                   f"{' (' + spec.variant + ')' if spec.variant else ''} ≤ {spec.limit:g} "
                   f"{study.metric(spec.metric).unit}, judged over all trials: a trial "
                   "without a solution counts as exceeding the limit.", "",
