@@ -107,6 +107,8 @@ def test_more_pixel_noise_is_worse_and_less_is_better(runs):
     assert set(compare_runs(b, a, "p95")["verdict"]) == {"better"}
     done = _cli(str(runs["a"]), str(runs["noisier"]))
     assert done.returncode == 1 and "worse" in done.stdout
+    assert ("independent samples: differences judged on simultaneous 95% intervals over the "
+            "independent rows (Bonferroni)") in done.stdout
 
 
 def test_independent_samples_of_one_model_are_the_same_on_their_intervals(runs):

@@ -98,7 +98,7 @@ def _cmd_nightly(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from montecarlo.output.compare import compare_runs, load_run, verdict_counts
+    from montecarlo.output.compare import compare_runs, confidence_of, load_run, verdict_counts
 
     check_json_option(args)
     a, b = load_run(args.run_a), load_run(args.run_b)
@@ -110,9 +110,12 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if not emit_json(args, {"a": str(a.path), "b": str(b.path), "study": a.name,
                             "statistic": statistic, "comparison": mode, "counts": counts,
                             "rows": table.to_dict("records")}):
+        level = f"{confidence_of(a):.0%}"
         how = ("paired: same seed and trials, so every difference is the code's"
-               if mode == "paired" else "independent samples: differences judged on their "
-               "95 % intervals" if mode == "independent" else "paired and independent rows")
+               if mode == "paired" else "independent samples: differences judged on "
+               f"simultaneous {level} intervals over the independent rows (Bonferroni)"
+               if mode == "independent" else "paired and independent rows; the independent "
+               f"ones on simultaneous {level} intervals (Bonferroni)")
         print(f"{a.name}: {b.path} against {a.path}, {statistic} ({how})")
         shown = table if args.all else table[table["verdict"] != "same"]
         if len(shown):

@@ -109,8 +109,7 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
     if rows.empty:
         raise InputError(f"{a.path} and {b.path} have no grid point in common")
     same_draws = paired(a, b)
-    confidence = float(a.provenance.get("resolved_study", {}).get("study", {})
-                       .get("confidence", 0.95))
+    confidence = confidence_of(a)
     z = float(ndtri(0.5 + confidence / 2.0))  # of each run's own intervals
     va, vb = rows[f"{statistic}_a"].to_numpy(float), rows[f"{statistic}_b"].to_numpy(float)
     diff = vb - va
@@ -137,6 +136,12 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
     out["comparison"] = np.where(exact, "paired", "independent")
     out["verdict"] = verdict
     return out.reset_index(drop=True)
+
+
+def confidence_of(run: Run) -> float:
+    """The confidence level of a run's study (its intervals' and the comparison's)."""
+    return float(run.provenance.get("resolved_study", {}).get("study", {})
+                 .get("confidence", 0.95))
 
 
 def simultaneous_z(confidence: float, m: int) -> float:
