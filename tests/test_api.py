@@ -85,6 +85,22 @@ def test_a_mean_spec_on_a_signed_metric_is_reported_as_the_bias_it_judges(tmp_pa
     assert "| abs(mean) (valid trials) | abs(mean) (all trials) |" in report
 
 
+@pytest.mark.parametrize(("trials", "open_above"), [(40, True), (200, False)])
+def test_p95_bars_end_in_an_arrow_where_the_trials_cannot_bound_p95_above(trials, open_above):
+    """Below about 60 trials there is no distribution-free upper bound of p95 at 95 %
+    (``p95_hi`` NaN): the bar is open above (an up caret, matplotlib's CARETUPBASE), not
+    closed at the estimate."""
+    from matplotlib.container import ErrorbarContainer
+    from matplotlib.lines import CARETUPBASE
+
+    result = montecarlo.run({**SMALL, "sweep": []}, trials=trials)
+    rows = result.summary[result.summary["metric"] == "rotation_angle"]
+    assert rows["p95_hi"].isna().all() == open_above
+    bars = [c for c in result.plot().containers if isinstance(c, ErrorbarContainer)]
+    markers = {line.get_marker() for line in bars[0].lines[1]}
+    assert (CARETUPBASE in markers) == open_above
+
+
 def test_a_mistake_is_an_input_error_naming_the_key():
     bad = {**SMALL, "sensor": {"fov_deg": [90.0, 90.0], "pixels": [0, 512]}}
     with pytest.raises(InputError, match=r"sensor\.pixels"):

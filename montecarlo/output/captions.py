@@ -52,8 +52,9 @@ def figure_caption(result: StudyResult, name: str) -> str:
                    stem[6:])
         return (f"{what} against {key_label(key)}. Statistics over the trials with a "
                 f"solution: p50 (line or dot), p95 (band, dashed line or bar end), p99 (dotted), "
-                f"max (×); error bars: the {ci} distribution-free confidence interval of p95, "
-                f"in {unit}. {pixel}{_spec_text(study)}")
+                f"max (×); error bars: the {ci} distribution-free confidence interval of p95 "
+                f"(an arrow up where the trials are too few to bound it above), in {unit}. "
+                f"{pixel}{_spec_text(study)}")
     if stem == "histograms":
         return (f"Distribution of {what} at each grid point: the fraction of all trials per "
                 f"bin (trials without a solution are in no bin), x axis in {unit}; dashed: "

@@ -108,6 +108,23 @@ def _spec_text(study: Study) -> str:
     return f"spec: {s.statistic_label(m.signed)} ≤ {s.limit:g} {m.unit}"
 
 
+def p95_interval(ax: Any, x: np.ndarray, rows: pd.DataFrame, color: str,
+                 label: str | None = None) -> None:
+    """The confidence interval of p95 as error bars (none over enumerated corners). Where the
+    trials are too few for an upper bound (``p95_hi`` NaN: fewer than about 60 at 95 %), the bar
+    ends in an arrow up: the interval is open above."""
+    ci = rows["p95_lo"].notna().to_numpy()
+    if not ci.any():
+        return
+    sel, xs = rows[ci], np.asarray(x)[ci]
+    open_above = sel["p95_hi"].isna().to_numpy()
+    p95, lo = sel["p95"].to_numpy(float), sel["p95_lo"].to_numpy(float)
+    # an open bar: an arrow a fifth of the estimate long (its length means nothing)
+    hi = np.where(open_above, 0.2 * np.abs(p95), sel["p95_hi"].to_numpy(float) - p95)
+    ax.errorbar(xs, p95, yerr=[p95 - lo, hi], lolims=open_above, fmt="none", ecolor=color,
+                capsize=2, lw=0.8, label=label)
+
+
 def _select(data: pd.DataFrame, keys: list[str], values: tuple) -> pd.DataFrame:
     for k, v in zip(keys, values, strict=True):
         data = data[data[k] == v]
@@ -194,11 +211,7 @@ def trend_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str,
                     if bad >= 0.005:  # trials without a solution: say how many
                         ax.annotate(f"{bad:.0%} no sol.", (xi, yi), xytext=(3, -9),
                                     textcoords="offset points", fontsize=6, color="C3")
-                ci = sel["p95_lo"].notna().to_numpy()  # none over enumerated corners
-                err_lo = sel["p95"][ci] - sel["p95_lo"][ci]
-                err_hi = (sel["p95_hi"][ci] - sel["p95"][ci]).fillna(0.0)
-                ax.errorbar(x[ci], sel["p95"][ci], yerr=[err_lo, err_hi], fmt="none",
-                            ecolor=color, capsize=2, lw=0.8)
+                p95_interval(ax, x, sel, color)
             if study.spec and study.spec.variant in (None, variant):
                 ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
             title = ", ".join(short_label(k, v) for k, v in zip(row_keys, row, strict=True))
@@ -453,13 +466,7 @@ def metric_axes(result: StudyResult, summary: pd.DataFrame, metric: str | None =
     ax.plot(x, data["p50"], "-o", ms=3, color="C0", label="p50")
     ax.fill_between(x, data["p50"], data["p95"], color="C0", alpha=0.2, lw=0, label="to p95")
     ax.plot(x, data["p99"], ":", color="C0", lw=1, label="p99")
-    ci = data["p95_lo"].notna().to_numpy()  # none over enumerated corners
-    if ci.any():
-        sel = data[ci]
-        ax.errorbar(x[ci], sel["p95"], yerr=[sel["p95"] - sel["p95_lo"],
-                                            (sel["p95_hi"] - sel["p95"]).fillna(0.0)],
-                    fmt="none", ecolor="C0", capsize=2, lw=0.8,
-                    label=f"{study.header.confidence:.0%} CI of p95")
+    p95_interval(ax, x, data, "C0", f"{study.header.confidence:.0%} CI of p95")
     if study.spec and study.spec.metric == metric and study.spec.variant in (None, variant):
         if study.spec.statistic not in ("p50", "p95", "p99"):
             ax.plot(x, data[study.spec.statistic], "x", color="C3", label=study.spec.statistic)
