@@ -60,10 +60,11 @@ class Result:
 
     def plot(self, metric: str | None = None, variant: str | None = None,
              ax: Axes | None = None) -> Axes:
-        """p50 with the p5-p95... band of ``metric`` against the first swept key (or per point).
+        """p50 with the band up to p95, p99 and the interval of p95 of ``metric`` against the
+        first swept key (or per point).
 
-        ``metric`` defaults to the study's plotted one (its spec's, else the first); ``ax`` to
-        a new figure's axes.
+        ``metric`` defaults to the study's plotted one (its spec's, else the rotation angle
+        where the system has one, else its first metric); ``ax`` to a new figure's axes.
         """
         from montecarlo.output.plots import metric_axes
 

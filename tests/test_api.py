@@ -101,6 +101,20 @@ def test_p95_bars_end_in_an_arrow_where_the_trials_cannot_bound_p95_above(trials
     assert (CARETUPBASE in markers) == open_above
 
 
+def test_a_study_without_a_spec_or_a_rotation_angle_plots_its_first_metric():
+    """The collimation system has no ``rotation_angle``: without a spec the plot shows its
+    first metric (it raised asking for the rotation angle)."""
+    import tomllib
+
+    from montecarlo.systems.catalog import starter_study
+
+    raw = tomllib.loads(starter_study("collimation"))
+    assert "spec" not in raw
+    result = montecarlo.run(raw, trials=4)
+    first = result.summary["metric"].iloc[0]
+    assert result.plot().get_ylabel().startswith(result._result.study.metric(first).label)
+
+
 def test_a_mistake_is_an_input_error_naming_the_key():
     bad = {**SMALL, "sensor": {"fov_deg": [90.0, 90.0], "pixels": [0, 512]}}
     with pytest.raises(InputError, match=r"sensor\.pixels"):

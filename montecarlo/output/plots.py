@@ -69,8 +69,11 @@ def short_label(key: str, value: Any) -> str:
 
 
 def plot_metric(study: Study) -> str:
-    """The metric plots show: the spec's, else the true rotation angle."""
-    return study.spec.metric if study.spec else "rotation_angle"
+    """The metric plots show: the spec's, else the true rotation angle, else the study's first."""
+    if study.spec:
+        return study.spec.metric
+    names = [m.name for _, m in study.metrics]
+    return "rotation_angle" if "rotation_angle" in names else names[0]
 
 
 def _zip_partners(study: Study) -> dict[str, tuple[str, ...]]:
