@@ -327,9 +327,11 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
         # no line break inside one key's label (non-breaking spaces)
         title = ", ".join(short_label(k, gp.values[k]).replace(" ", "\u00a0")
                           for k in varying) or f"point {p}"
-        invalid = rows["invalid_fraction"].max()
-        if invalid > 0:
-            title += f"; no solution: {invalid:.1%}"
+        shares = rows.set_index("variant")["invalid_fraction"].reindex(variants).dropna()
+        invalid = shares.max() if len(shares) else 0.0
+        if invalid > 0:  # by variant where they differ (one solver may fail where another not)
+            title += "; no\u00a0solution: " + (f"{invalid:.1%}" if shares.nunique() == 1 else
+                                          ", ".join(f"{v} {x:.1%}" for v, x in shares.items()))
         ax.set_title(textwrap.fill(f"{p}: {title}", 52), fontsize=7,
                      color="C3" if invalid > 0 else "k")
         ax.tick_params(labelsize=7)
