@@ -123,6 +123,18 @@ def test_independent_samples_of_one_model_are_the_same_on_their_intervals(runs):
     assert verdict_counts(maxima)["undecided"] == len(maxima) > 0
 
 
+def test_the_nightly_change_check_of_independent_samples_does_not_count_a_max_as_changed(runs):
+    """Another seed (as after a study file changed): the nightly's check passes, names the
+    undecided maxima, and states the interval criterion it applied, not the paired one."""
+    from montecarlo.tools.nightly import change_check
+
+    check = change_check(runs["a"].name, runs["a"].parent, runs["other_seed"], accept=False)
+    assert check.passed and "independent" in check.name
+    assert check.value.startswith("0 of ") and "undecided (a sampled max has no interval)" \
+        in check.value
+    assert check.expected == "no difference outside its simultaneous interval"
+
+
 def test_the_interval_of_a_difference_narrows_with_trials(runs):
     a = load_run(runs["a"])
     small = compare_runs(a, load_run(runs["other_seed"]), "mean")

@@ -10,7 +10,9 @@ Runs ``studies/table1.toml`` and ``studies/trends.toml``, checks
 
 for both solver variants, on the mean and the p95 of the true rotation angle; and that nothing
 changed since the previous nightly run (:mod:`montecarlo.output.compare`: with the same study
-files the runs are paired, so any difference beyond 1e-9 is the code's). Appends the numbers
+files the runs are paired, so any difference beyond 1e-9 is the code's; after a study file
+changed they are independent samples, judged on their intervals, and a sampled max, which has
+none, is undecided rather than changed). Appends the numbers
 behind every check (value, unit, interval, expected range) to ``results/nightly/history.csv``,
 plots them in ``plots/history.png``, writes ``report.md`` and exits non-zero if any check fails.
 """
@@ -156,16 +158,21 @@ def change_check(name: str, previous: Path, summary_dir: Path, accept: bool) -> 
         return Check(f"{name}: unchanged since the previous nightly", accept,
                      f"not comparable ({exc})", "the same results")
     counts = verdict_counts(table)
-    changed = len(table) - counts["same"]
-    mode = "paired" if paired(a, b) else "independent (the study file changed)"
+    changed = counts["better"] + counts["worse"]
+    same_draws = paired(a, b)
+    mode = "paired" if same_draws else "independent (the study file changed)"
     commit = a.provenance.get("git_commit")
-    worst = table.loc[table["rel_diff"].abs().idxmax()] if changed else None
+    moved = table[table["verdict"].isin(["better", "worse"])]
+    worst = moved.loc[moved["rel_diff"].abs().idxmax()] if changed else None
     value = f"{changed} of {len(table)} statistics changed ({counts['worse']} worse)" + (
         f"; largest {worst['rel_diff']:+.3%} ({worst['statistic']} of {worst['metric']}, "
-        f"{worst['variant']}, point {worst['point']})" if worst is not None else "")
+        f"{worst['variant']}, point {worst['point']})" if worst is not None else "") + (
+        f"; {counts['undecided']} undecided (a sampled max has no interval)"
+        if counts["undecided"] else "")
     return Check(f"{name}: unchanged since the previous nightly (commit {commit}, {mode})",
                  changed == 0 or accept, value + (" — accepted" if changed and accept else ""),
-                 "no change beyond 1e-9 (relative)",
+                 "no change beyond 1e-9 (relative)" if same_draws else
+                 "no difference outside its simultaneous interval",
                  (_number("statistics changed since the previous nightly", changed, "rows",
                           expected=(0.0, 0.0)),))
 
