@@ -151,8 +151,29 @@ def test_pilot_plan_by_hand():
     assert list(plan["trials_to_decide"]) == [250, 563, 1000, 1000]
     assert str(plan["trials_to_decide"].dtype) == "Int64"
     assert list(plan["trials_for_width_0.125"]) == [16000, 36000, 256000, 1000]
-    assert plan["trials_for_width_0.125"].dtype == np.int64
+    assert str(plan["trials_for_width_0.125"].dtype) == "Int64"
     assert list(plan.index) == [0, 1, 2, 3]
+
+
+def test_pilot_plan_decides_on_the_statistic_the_verdict_judges():
+    """With 6 % of the trials without a value, the p95 over all trials (what the verdict
+    judges) is 4.25 in [4.0, 4.25] and open above at point 1; over the trials with a value it is
+    4.0 in [3.75, 4.125]. Against p95 <= 4.5 the plan works from the judged one: half-width 0.25
+    at distance 0.25 -> 1000 trials at point 0; open above -> <NA> at point 1, for the
+    decision and for any width. At point 2 more than 5 % have no value: the judged p95 is
+    infinite and fails, decided with the pilot's trials, and no width can be reached."""
+    spec = SimpleNamespace(metric="rotation_angle", statistic="p95", limit=4.5, variant="raw")
+    summary = _summary(value=(4.0, 4.0, 4.0), lo=(3.75, 3.75, 3.75), hi=(4.125, 4.125, 4.125),
+                       verdict=("undecided", "undecided", "fails"), sampling=("random",) * 3)
+    summary["spec_value"] = np.where(summary["point"] < 2, summary["p95"] + 0.25, np.inf)
+    summary["spec_lo"] = np.where(summary["point"] < 2, summary["p95_lo"] + 0.25, np.inf)
+    summary["spec_hi"] = np.where(summary["point"] == 0, summary["p95_hi"] + 0.125, np.inf)
+    plan = planning.pilot_plan(_result(spec), summary, width=0.5)
+    assert list(plan["p95"]) == [4.25, 4.25, np.inf]
+    assert list(plan["p95_lo"]) == [4.0, 4.0, np.inf]
+    assert list(plan["p95_hi"]) == [4.25, np.inf, np.inf]
+    assert list(plan["trials_to_decide"].astype(object).fillna(-1)) == [1000, -1, 1000]
+    assert list(plan["trials_for_width_0.5"].astype(object).fillna(-1)) == [1000, -1, -1]
 
 
 def test_pilot_plan_on_a_value_at_the_limit_and_without_a_variant():

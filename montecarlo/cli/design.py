@@ -251,8 +251,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         print(f"  {stat} (mean of the worst {1 - p:.0%}): its interval is asymptotically "
               f"normal, not distribution-free; within 2 points of its coverage from "
               f"{math.ceil(250 / (1 - p)):,} trials (250 in the tail)")
-    print(f"from a pilot of {pilot_trials:,} trials per grid point (estimates: the interval "
-          "half-width shrinks as 1/sqrt(n); `run --until-decided` checks):")
+    over = " over all trials, as the verdict judges it (no value = above the limit)" \
+        if spec is not None and "verdict" in table else ""
+    print(f"from a pilot of {pilot_trials:,} trials per grid point, the statistic{over} "
+          "(estimates: the interval half-width shrinks as 1/sqrt(n); `run --until-decided` "
+          "checks):")
     print(table.to_string(index=False))
     return 0
 

@@ -123,7 +123,12 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
                ) -> pd.DataFrame:
     """Per grid point and variant of the spec's metric (or the plotted one): the pilot's
     statistic and interval, and the trials estimated to decide the spec verdict and to reach
-    an interval of full ``width`` [the metric's display unit]."""
+    an interval of full ``width`` [the metric's display unit].
+
+    Where the summary judged a spec with an interval, the statistic and interval are those it
+    judged, over all trials (a trial without a value counting as exceeding: ``spec_value``,
+    ``spec_lo``, ``spec_hi``), so that the trials to decide are those of its verdict; otherwise
+    those over the trials with a value."""
     study = result.study
     spec = study.spec
     metric = spec.metric if spec else study.metrics[0][1].name
@@ -132,10 +137,13 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
     if spec and spec.variant:
         rows = rows[rows["variant"] == spec.variant]
     out = rows[["point", *study.sweep_keys, "variant", "unit", "trials", "sampling"]].copy()
-    value = rows[stat].to_numpy(float)
-    lo, hi = rows[f"{stat}_lo"].to_numpy(float), rows[f"{stat}_hi"].to_numpy(float)
+    judged = spec is not None and stat == spec.statistic and "spec_value" in rows
+    columns = ("spec_value", "spec_lo", "spec_hi") if judged else \
+        (stat, f"{stat}_lo", f"{stat}_hi")
+    value, lo, hi = (rows[c].to_numpy(float) for c in columns)
     n0 = rows["trials"].to_numpy(float)
-    half = np.maximum(value - lo, hi - value)
+    with np.errstate(invalid="ignore"):  # an infinite statistic (too many without a value)
+        half = np.where(np.isinf(value), np.inf, np.maximum(value - lo, hi - value))
     out[stat], out[f"{stat}_lo"], out[f"{stat}_hi"] = value, lo, hi
     sampled = (rows["sampling"] != "enumerated").to_numpy()
     unbounded = sampled & np.isnan(half) & ~np.isnan(value)
@@ -153,9 +161,10 @@ def pilot_plan(result: StudyResult, summary: pd.DataFrame, width: float | None =
         need = np.where(decided | ~sampled, n0, need)
         out["trials_to_decide"] = pd.array(
             [int(v) if np.isfinite(v) else pd.NA for v in need], dtype="Int64")
-    if width is not None:
-        out[f"trials_for_width_{width:g}"] = np.where(
-            sampled, np.ceil(n0 * (2.0 * half / width) ** 2), n0).astype(np.int64)
+    if width is not None:  # <NA> where the interval is open (too many trials without a value)
+        need = np.where(sampled, np.ceil(n0 * (2.0 * half / width) ** 2), n0)
+        out[f"trials_for_width_{width:g}"] = pd.array(
+            [int(v) if np.isfinite(v) else pd.NA for v in need], dtype="Int64")
     return out.reset_index(drop=True)
 
 
