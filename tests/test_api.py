@@ -130,6 +130,19 @@ def test_histogram_titles_give_the_no_solution_share_of_each_variant_where_they_
                for t in titles)
 
 
+def test_a_sampled_max_spec_says_what_meets_means(tmp_path):
+    """A max over sampled trials bounds a share of all trials, not every one: the report's
+    requirement says so; a percentile's does not need to."""
+    raw = {**SMALL, "spec": {"metric": "rotation_angle", "statistic": "max", "limit": 50.0},
+           "sweep": []}
+    note = "Over sampled trials, `meets` says that the largest trial drawn is within the limit"
+    result = montecarlo.run(raw, trials=1000)
+    assert set(result.summary["verdict"].dropna()) == {"meets"}
+    assert note in (result.report(tmp_path / "max") / "report.md").read_text()
+    p95 = montecarlo.run({**raw, "spec": {**raw["spec"], "statistic": "p95"}}, trials=1000)
+    assert note not in (p95.report(tmp_path / "p95") / "report.md").read_text()
+
+
 def test_a_mistake_is_an_input_error_naming_the_key():
     bad = {**SMALL, "sensor": {"fov_deg": [90.0, 90.0], "pixels": [0, 512]}}
     with pytest.raises(InputError, match=r"sensor\.pixels"):

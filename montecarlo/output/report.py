@@ -12,6 +12,16 @@ from montecarlo.engine.runner import StudyResult
 from montecarlo.output.plots import key_label, plot_metric
 
 
+def _sampled_max_note(statistic: str, summary: pd.DataFrame) -> str:
+    """What 'meets' says of a max over sampled trials (nothing for other statistics)."""
+    if statistic != "max" or not (summary["sampling"] == "random").any():
+        return ""
+    return (" Over sampled trials, `meets` says that the largest trial drawn is within the "
+            "limit: it bounds the share of all possible trials in the `bounds` column at the "
+            "stated confidence, not every one of them; only enumerated corners give the "
+            "worst case itself.")
+
+
 def _where(result: StudyResult) -> str:
     """Where the trials of a run ran, as recorded (nothing if not recorded or none ran)."""
     n = result.workers
@@ -140,7 +150,8 @@ def render_report(result: StudyResult, summary: pd.DataFrame, provenance: dict[s
                   f"`{spec.metric}`"
                   f"{' (' + spec.variant + ')' if spec.variant else ''} ≤ {spec.limit:g} "
                   f"{study.metric(spec.metric).unit}, judged over all trials: a trial "
-                  "without a solution counts as exceeding the limit.", "",
+                  "without a solution counts as exceeding the limit." + _sampled_max_note(
+                      spec.statistic, summary), "",
                   markdown_table(verdicts), ""]
 
     cols = ["point", *study.sweep_keys, "variant", "count", "invalid", "sampling", "mean", "std",
