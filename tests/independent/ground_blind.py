@@ -8,7 +8,7 @@ Written from two documents only:
 * the seed text ``000_4eae2b9bbe75c428.txt`` (Ding Tao, "捷联光电设备瞄准线校准技术",
   2014, doi:10.7690/bgzdh.2014.01.018), section 1, eqs. (1)-(18) and the simulation set-up of
   section 1.4;
-* ``FORMAT_GROUND.md`` (the CSV / truth-JSON layout).
+* ``FORMAT_GROUND.md`` (the CSV / truth-JSON layout; kept here as ``ground_format.md``).
 
 Nothing else (no other code, documentation or data) was consulted. Every convention below is
 derived from the paper's own equations; where the paper leaves something open, the choice is
