@@ -99,7 +99,7 @@ def test_blind_null_data_name_nothing_and_fit_the_angles(tmp_path):
     rng = np.random.default_rng(11)
     named = 0
     for i in range(20):
-        angles = (30.0, 20.0, 10.0) + rng.uniform(-5.0, 5.0, 3)
+        angles = np.array([30.0, 20.0, 10.0]) + rng.uniform(-5.0, 5.0, 3)
         d = _diagnosis(tmp_path, angles, 100 + i)
         named += bool(d.named)
         assert np.all(np.abs(_angle_z(d.after, angles)) < 3.0)
@@ -117,7 +117,7 @@ def test_blind_acceptance_at_100_sets_per_case(tmp_path):
     for effect, (value, expected) in {"null": (None, {()}), **EFFECTS}.items():
         named, cover = collections.Counter(), np.zeros(3)
         for i in range(100):
-            angles = (30.0, 20.0, 10.0) + rng.uniform(-5.0, 5.0, 3)
+            angles = np.array([30.0, 20.0, 10.0]) + rng.uniform(-5.0, 5.0, 3)
             d = _diagnosis(tmp_path, angles, 1000 + i,
                            effects=None if effect == "null" else {effect: value})
             named[tuple(d.named)] += 1
