@@ -92,6 +92,32 @@ def test_each_hidden_effect_of_the_blind_simulator_is_named(tmp_path, effect):
     assert np.all(np.abs(_angle_z(d.after, (30.0, 20.0, 10.0))) < 4.0)
 
 
+@pytest.mark.parametrize(("effect", "fov", "pixels"), [
+    ("principal_point_px", (20.0, 15.0), (2048, 1536)),
+    ("radial_k1", (20.0, 15.0), (2048, 1536)),
+    ("principal_point_px", (60.0, 45.0), (1280, 960)),
+])
+def test_a_blind_effect_the_design_cannot_see_is_said_to_be_so(tmp_path, effect, fov, pixels):
+    """On a narrow field an image-centre shift is a turn of the mounting (the diagnosis says
+    it is absorbed by psi and theta), and k1 = -0.008 moves the field's edge by a quarter of a
+    pixel (its minimal detectable bias, MDB, is above 0.008); on a 60 x 45 deg field the
+    (1.5, -1.0) px shift is below its MDB. None is named, and the report's candidate table
+    says why."""
+    value, _ = EFFECTS[effect]
+    d = _diagnosis(tmp_path, (30.0, 20.0, 10.0), 2000, effects={effect: value}, fov=fov,
+                   pixels=pixels)
+    assert d.named == []
+    test = {t.name: t for t in d.steps[-1].tests}[
+        "principal_point" if effect == "principal_point_px" else "radial_distortion"]
+    if effect == "radial_k1":
+        assert test.status == "testable" and test.mdb["k1"] > abs(value)
+    elif fov[0] < 30.0:
+        assert test.status == "absorbed" and test.reason == "absorbed by psi, theta"
+    else:
+        assert test.status == "testable"
+        assert test.mdb["c_x"] > abs(value[0]) and test.mdb["c_z"] > abs(value[1])
+
+
 def test_blind_null_data_name_nothing_and_fit_the_angles(tmp_path):
     """20 null sets at angles drawn around section 1.4's: nothing named (at alpha = 0.01 per
     set, the chance of more than two false alarms in 20 is 1e-3), the mounting within 3 sigma
