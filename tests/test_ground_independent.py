@@ -120,16 +120,18 @@ def test_a_blind_effect_the_design_cannot_see_is_said_to_be_so(tmp_path, effect,
 
 def test_blind_null_data_name_nothing_and_fit_the_angles(tmp_path):
     """20 null sets at angles drawn around section 1.4's: nothing named (at alpha = 0.01 per
-    set, the chance of more than two false alarms in 20 is 1e-3), the mounting within 3 sigma
-    in every set."""
+    set, the chance of more than two false alarms in 20 is 1e-3); of the 60 angle errors at
+    most one beyond 3 sigma (expected 0.16; two or more 1.2 %) and none beyond 4.5 sigma
+    (4e-4 for all 60)."""
     rng = np.random.default_rng(11)
-    named = 0
+    named, z = 0, []
     for i in range(20):
         angles = np.array([30.0, 20.0, 10.0]) + rng.uniform(-5.0, 5.0, 3)
         d = _diagnosis(tmp_path, angles, 100 + i)
         named += bool(d.named)
-        assert np.all(np.abs(_angle_z(d.after, angles)) < 3.0)
+        z.extend(np.abs(_angle_z(d.after, angles)))
     assert named <= 2
+    assert sum(v > 3.0 for v in z) <= 1 and max(z) < 4.5
 
 
 @pytest.mark.slow

@@ -327,7 +327,8 @@ def runner_path(s: dict[str, Any]) -> str:
     """How the runner ran one row of the scaling series, in words."""
     path = "fused kernel" if s["kernel"] == "fast" else "literal reference"
     n = s["workers"]
-    return f"{path}, in the calling process" if n == 0 else f"{path}, {n} worker processes"
+    return f"{path}, in the calling process" if n == 0 else \
+        f"{path}, {n} worker process{'es' if n != 1 else ''}"
 
 
 STABILIZATION_WORKLOAD = {
