@@ -135,3 +135,27 @@ def test_collimation_groups_use_the_generic_mechanism():
     assert group["fitted"] == "theodolite_collimation"
     assert group["members"] == ["theodolite_collimation", "axis_misalignment"]
     assert group["cannot_separate"][0]["separating_data"] == GENERIC_SEPARATION
+
+
+def test_the_text_says_which_p_value_a_named_effect_has_and_why_each_was_dropped():
+    """The shipped ground diagnosis, edited: an effect swapped in at the end has its Wald test
+    in the final model, not a Holm-adjusted identification p-value; an effect or observation
+    left out without a p-value was not dropped for want of significance (the engine records
+    NaN for an observation one effect replaced and for an adaptation that was singular)."""
+    import json
+    from pathlib import Path
+
+    root = Path(__file__).parent.parent
+    report = json.loads((root / "results/examples/discrepancy_ground/diagnosis.json").read_text())
+    assert "identification p = 2.24e-152 (Holm)" in format_text(report)
+    report["named_effects"][0]["swapped_in"] = True
+    report["dropped_effects"] = [{"name": "target_range_bias", "p_value": 0.2},
+                                 {"name": "outlier:T07", "p_value": math.nan},
+                                 {"name": "lever_arm", "p_value": math.nan}]
+    text = format_text(report)
+    assert "(Wald test in the final model, swapped in at the end)" in text
+    assert ("dropped: target_range_bias (named earlier, not significant given the others: "
+            "p = 0.2, Holm)") in text
+    assert "dropped: outlier:T07 (flagged earlier; one effect named instead explains it)" in text
+    assert "dropped: lever_arm (its adapted model is singular with these data: not fitted)" \
+        in text

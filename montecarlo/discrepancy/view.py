@@ -206,6 +206,16 @@ def _p(p: float) -> str:
     return "< 1e-300" if p == 0.0 else f"{p:.3g}"
 
 
+def _why_dropped(e: Mapping[str, Any]) -> str:
+    """Why the diagnosis left out an effect or observation it had taken up (the engine records
+    no p-value for the last two reasons)."""
+    if not math.isnan(e["p_value"]):
+        return f"named earlier, not significant given the others: p = {_p(e['p_value'])}, Holm"
+    if is_outlier(e["name"]):
+        return "flagged earlier; one effect named instead explains it"
+    return "its adapted model is singular with these data: not fitted"
+
+
 def format_text(report: Mapping[str, Any]) -> str:
     """Human-readable summary of :func:`to_json`."""
     g, unit = report["gap"], report["rms_unit"]
@@ -222,8 +232,10 @@ def format_text(report: Mapping[str, Any]) -> str:
     for e in report["named_effects"]:
         values = ", ".join(f"{k} = {v:.4g} ± {e['stderr'][k]:.2g}{_unit(e['units'][k])}"
                            for k, v in e["parameters"].items())
+        how = "Wald test in the final model, swapped in at the end" if e.get("swapped_in") \
+            else "Holm"
         lines.append(f"named: {e['name']} ({values}); identification p = "
-                     f"{_p(e['p_value'])} (Holm), T = {e['statistic']:.1f} on {e['dof']} dof")
+                     f"{_p(e['p_value'])} ({how}), T = {e['statistic']:.1f} on {e['dof']} dof")
     for g in report.get("groups", []):
         values = ", ".join(f"{k} = {v:.4g} ± {g['stderr'][k]:.2g}{_unit(g['units'][k])}"
                            for k, v in g["parameters"].items())
@@ -243,8 +255,7 @@ def format_text(report: Mapping[str, Any]) -> str:
         lines.append(f"swapped: {e['in']} fits better than {e['out']} with the others "
                      f"(AIC {e['aic_before']:.1f} -> {e['aic_after']:.1f})")
     for e in report["dropped_effects"]:
-        lines.append(f"dropped: {e['name']} (named earlier, not significant given the "
-                     f"others: p = {_p(e['p_value'])}, Holm)")
+        lines.append(f"dropped: {e['name']} ({_why_dropped(e)})")
     if report["absorbed"]:
         lines.append(f"absorbed by the model (never named): {', '.join(report['absorbed'])}")
     if report["detected"]:
