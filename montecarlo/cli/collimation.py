@@ -322,7 +322,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    "ins_az_deg, ins_el_deg[, ins_roll_deg]")
     add_json_option(p, "the offsets, residuals and corrected readings")
     p.add_argument("--angle-sigma-arcsec", type=positive, metavar="S",
-                   help="known sigma of each heading/pitch residual (default: from residuals)")
+                   help="known sigma of a heading or pitch difference, theodolite and INS "
+                   "combined: each angle of the file errs by S/sqrt(2) (default: from the "
+                   "residuals)")
     p.add_argument("--fit-frame-tilt", action="store_true",
                    help="also fit the tilt of the theodolite frame against the INS level "
                    "(--readings absolute only)")

@@ -462,7 +462,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("data", help="CSV: mirror, set, theodolite_az_deg, theodolite_el_deg, "
                    "ins_az_deg, ins_el_deg[, ins_roll_deg]")
     p.add_argument("--angle-sigma-arcsec", type=positive, required=True, metavar="S",
-                   help="standard deviation of each heading and pitch residual [arc-seconds]")
+                   help="standard deviation of a heading or pitch difference, theodolite and "
+                   "INS combined [arc-seconds]; under --readings reference each angle of the "
+                   "file is taken to err by S/sqrt(2) and the relative readings' covariance "
+                   "is propagated from that")
     p.add_argument("--readings", choices=("reference", "absolute"), default="reference",
                    help="reference (default): the paper's procedure, readings relative to the "
                    "INS's reference (reference rows, or relative readings); absolute: the "
