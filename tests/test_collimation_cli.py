@@ -205,6 +205,7 @@ def test_auto_takes_the_side_the_data_support_and_warns_once(tmp_path, capsys):
     side = r["roll_mirror"]
     assert side["chosen"] == "left" and side["stated"] == "right" and side["decided"]
     assert side["chi2_right"] > 10 * side["chi2_left"]
+    assert side["weights"] == "1 arcsec per reading"  # sigmas a posteriori here
     assert r["azimuth_sense"]["chosen"] == "same"
     assert r["claim_15_arcsec"]["in_sample"] is True
     assert len(err) == 1 and err[0].startswith("warning: the data reject the roll mirror on "

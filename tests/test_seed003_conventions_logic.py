@@ -55,8 +55,8 @@ def test_a_rejected_stated_option_warns_and_is_replaced_unless_forced():
                                "way as the INS heading (chi2 100 against 1.5 for opposite); "
                                "using opposite")
     assert sense.to_json() == {"chosen": "opposite", "stated": "same", "chi2_same": 100.0,
-                               "chi2_opposite": 1.5, "decided": True, "rejects_stated": True,
-                               "reason": ""}
+                               "chi2_opposite": 1.5, "weights": "the given sigmas",
+                               "decided": True, "rejects_stated": True, "reason": ""}
 
 
 def test_a_tie_keeps_the_stated_option_with_the_reason_given():

@@ -80,6 +80,9 @@ class Choice:
     chi2: dict[str, float]
     decided: bool
     reason: str = ""
+    chi2_weights: str = "the given sigmas"
+    """The reading sigmas the chi-squares are at (``"1 arcsec per reading"`` when the fit's
+    sigmas are estimated a posteriori, so that the options compare)."""
 
     @property
     def rejects_stated(self) -> bool:
@@ -90,8 +93,8 @@ class Choice:
         return {"chosen": self.chosen, "stated": self.stated,
                 **{f"chi2_{k}": (v if math.isfinite(v) else None)
                    for k, v in self.chi2.items()},
-                "decided": self.decided, "rejects_stated": self.rejects_stated,
-                "reason": self.reason}
+                "weights": self.chi2_weights, "decided": self.decided,
+                "rejects_stated": self.rejects_stated, "reason": self.reason}
 
     def warning(self) -> str | None:
         """One line when the data reject the stated option, else None."""
@@ -215,4 +218,6 @@ def fit_with_conventions(data: ProcedureData, *, side: str = "auto", sense: str 
     chosen = with_sense(data, sn)
     result = fit(chosen, side=SIDES[side_choice.chosen], sigma_ins=sigma_ins,
                  sigma_theodolite=sigma_theodolite, **kwargs)
-    return result, chosen, {"roll_mirror": side_choice, "azimuth_sense": sense_choice}
+    weights = "the given sigmas" if given else "1 arcsec per reading"
+    return result, chosen, {k: dataclasses.replace(c, chi2_weights=weights) for k, c in
+                            (("roll_mirror", side_choice), ("azimuth_sense", sense_choice))}
