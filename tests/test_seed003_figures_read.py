@@ -27,8 +27,9 @@ def test_paper_statements_values_by_hand():
             assert got == pytest.approx(want, rel=2e-3, abs=2e-3), rows[i]["quantity"]
     # second order: |delta alpha| / lambda and delta beta(60) / gamma of the order of the offset
     assert 0.5 * OFFSET < model[2] < 2 * OFFSET and 0.5 * OFFSET < model[7] < 2 * OFFSET
-    assert [r["holds"] for r in rows] == [True, True, True, True, False, True, True, False, True]
-    assert all(isinstance(r["holds"], bool) and isinstance(r["model"], float) for r in rows)
+    assert [r["holds"] for r in rows] == [True, True, None, True, False, True, True, False, True]
+    assert all(isinstance(r["holds"], bool) for i, r in enumerate(rows) if i != 2)
+    assert all(isinstance(r["model"], float) for r in rows)
     assert rows[3]["statement"] == "at α = 180°, Δβ is almost twice λ"
     assert rows[3]["quantity"] == "Δβ(180°) / λ"
     assert rows[7]["statement"] == "at β = 60°, Δβ is almost equal to γ"

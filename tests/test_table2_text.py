@@ -81,7 +81,7 @@ def test_table2_grid_takes_a_generator_and_the_default_configuration():
 def test_describe_states_the_configuration_in_the_units_people_use():
     """By hand: dt 0.01 s -> IMU 100 Hz; kf_interval 4 -> update every 0.04 s, 25 Hz; ARW
     0.01 °/√h = 0.01 pi / 180 / 60 rad/√s; VRW 50 µg/√Hz = 50e-6 g; attitude noise 0.25 mrad;
-    bank 20°, initial misalignment 0.25° level, 2° heading."""
+    bank 20°, initial misalignment 1σ 0.25° about each level axis, 2° in heading."""
     cfg = ta.AlignmentConfig(manoeuvre="wing_rock", speed=150.0, bank=math.radians(20.0),
                              period=40.0, duration=90.0, dt=0.01, kf_interval=4,
                              velocity_noise=0.1, attitude_matching=True,
@@ -91,12 +91,12 @@ def test_describe_states_the_configuration_in_the_units_people_use():
     assert t2.describe(cfg) == (
         "velocity + attitude matching; wing_rock (speed 150 m/s, bank 20°, period 40 s), 90 s; "
         "IMU 100 Hz, Kalman update 25 Hz; master velocity noise 0.1 m/s, attitude noise "
-        "0.25 mrad; ARW 0.01 °/√h, VRW 50 µg/√Hz; initial misalignment 0.25° level, "
-        "2° heading")
+        "0.25 mrad; ARW 0.01 °/√h, VRW 50 µg/√Hz; initial misalignment 1σ 0.25° about each "
+        "level axis, 2° in heading")
     assert t2.describe(ta.AlignmentConfig()) == (
         "velocity matching; s_turn (speed 200 m/s, bank 30°, period 60 s), 120 s; IMU 50 Hz, "
         "Kalman update 5 Hz; master velocity noise 0.05 m/s; ARW 0.005 °/√h, VRW 20 µg/√Hz; "
-        "initial misalignment 0.5° level, 1° heading")
+        "initial misalignment 1σ 0.5° about each level axis, 1° in heading")
 
 
 def _hand_table(runs=7):

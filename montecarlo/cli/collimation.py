@@ -308,7 +308,8 @@ def _cmd_collimation_figures(args: argparse.Namespace) -> int:
     print(f"wrote {args.outdir}/fig3.png ... fig6.png, procedure.png")
     print("seed 003, section 2 statements, evaluated with offsets of 0.1° (level mount):")
     for row in paper_statements():
-        verdict = "holds" if row["holds"] else "DOES NOT HOLD"
+        verdict = "judged in the row above" if row["holds"] is None else \
+            "holds" if row["holds"] else "DOES NOT HOLD"
         print(f"  {row['statement']}: {row['quantity']} = {row['model']:.4g} -> {verdict}")
     return 0
 

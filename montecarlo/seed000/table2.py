@@ -101,8 +101,9 @@ def describe(cfg: AlignmentConfig) -> str:
         f"{1 / (cfg.dt * cfg.kf_interval):g} Hz; master velocity noise {cfg.velocity_noise:g} m/s"
         + (f", attitude noise {cfg.attitude_noise * 1e3:g} mrad" if cfg.attitude_matching else "")
         + f"; ARW {cfg.gyro_arw / (np.pi / 180 / 60):g} °/√h, VRW "
-        f"{cfg.accel_vrw / G0 * 1e6:g} µg/√Hz; initial misalignment "
-        f"{np.degrees(cfg.initial_level):g}° level, {np.degrees(cfg.initial_heading):g}° heading"
+        f"{cfg.accel_vrw / G0 * 1e6:g} µg/√Hz; initial misalignment 1σ "
+        f"{np.degrees(cfg.initial_level):g}° about each level axis, "
+        f"{np.degrees(cfg.initial_heading):g}° in heading"
     )
 
 

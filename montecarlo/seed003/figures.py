@@ -169,7 +169,8 @@ def paper_statements(offset: float = math.radians(0.1)) -> list[dict[str, object
     Returns
     -------
     list of dict with ``statement``, ``quantity``, ``model`` (value in units of the offset
-    unless said otherwise) and ``holds`` (bool), in the order of the text.
+    unless said otherwise) and ``holds`` (bool; None for a row shown with the claim of the
+    row above), in the order of the text.
     """
     a = np.radians(np.linspace(0.0, 180.0, 721))
     b = np.radians(np.linspace(0.0, 85.0, 341))
@@ -177,7 +178,7 @@ def paper_statements(offset: float = math.radians(0.1)) -> list[dict[str, object
 
     def add(statement, quantity, value, holds):
         out.append({"statement": statement, "quantity": quantity, "model": float(value),
-                    "holds": bool(holds)})
+                    "holds": None if holds is None else bool(holds)})
 
     h_g = np.abs(pair_deviation("horizontal", a, axis_az=offset))
     add("horizontal pair, azimuth offset: INS change almost equals the mirror change",
@@ -186,7 +187,7 @@ def paper_statements(offset: float = math.radians(0.1)) -> list[dict[str, object
     add("horizontal pair, pitch offset: clear difference, especially in pitch",
         "max |Δβ| / λ (max |Δα| / λ in the next row)", np.max(np.abs(db)) / offset,
         np.max(np.abs(db)) > 10 * np.max(np.abs(da)))
-    add("(same)", "max |Δα| / λ", np.max(np.abs(da)) / offset, True)
+    add("(same)", "max |Δα| / λ", np.max(np.abs(da)) / offset, None)  # the row above's claim
     _, db180 = pair_deviation("horizontal", math.pi, axis_el=offset)
     add("at α = 180°, Δβ is almost twice λ", "Δβ(180°) / λ", db180 / offset,
         abs(abs(db180) / offset - 2.0) < 0.05)
