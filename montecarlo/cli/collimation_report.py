@@ -334,7 +334,7 @@ def _convention_lines(report: Mapping[str, object]) -> list[str]:
             continue
         shown = ", ".join(f"{k} {'-' if v is None else f'{v:.4g}'}" for k, v in chi2.items())
         verdict = ("decided by the data" if c["decided"] else f"not decided: {c['reason']}")
-        at = c.get("weights", "the given sigmas")
-        out.append(f"{label}: {c['chosen']} (stated {c['stated']}; χ² at {at}: {shown}; "
+        at = f" at {c['weights']}" if "weights" in c else ""  # (not in older reports)
+        out.append(f"{label}: {c['chosen']} (stated {c['stated']}; χ²{at}: {shown}; "
                    f"{verdict})")
     return out

@@ -283,25 +283,28 @@ def estimated_seconds(study: Study, points: list[int], reference: bool) -> float
     return per_trial * sum(study.points[p].trials for p in points)
 
 
-def in_calling_process(options: RunOptions, work: float) -> bool:
-    """Whether trials of ``work`` estimated seconds run in the calling process (``options``
-    checked): one worker asked for on loky, or too little work to pay for starting workers."""
-    return options.backend == "loky" and (options.n_jobs == 1 or work < IN_PROCESS)
-
-
 def planned_workers(study: Study, points: list[int], options: RunOptions,
                     reference: bool) -> int | None:
     """Worker processes the trials of ``points`` will run on (``options`` checked): 0 for no
-    points or in the calling process, else the workers given a task (at most ``n_jobs``; a
-    study of fewer tasks leaves the others idle); None on a dask scheduler given by address,
-    whose workers are not counted."""
-    if not points or in_calling_process(options, estimated_seconds(study, points, reference)):
+    points or in the calling process (one worker asked for on loky, or too little work to pay
+    for starting workers), else the workers given a task (at most ``n_jobs``; a study of fewer
+    tasks leaves the others idle); None on a dask scheduler given by address, whose workers
+    are not counted."""
+    work = estimated_seconds(study, points, reference)
+    if not points or (options.backend == "loky" and (options.n_jobs == 1 or work < IN_PROCESS)):
         return 0
     if options.scheduler:
         return None
     chunk = _chunk_blocks(study, points, options)
     tasks = sum(math.ceil(_n_blocks(study, p) / chunk) for p in points)
     return min(options.n_jobs or 1, tasks)
+
+
+def workers_text(workers: int) -> str:
+    """Where trials ran (:func:`planned_workers`): 'in the calling process', '2 worker
+    processes'."""
+    return "in the calling process" if workers == 0 else \
+        f"on {workers} worker process{'es' if workers != 1 else ''}"
 
 
 def plan_text(seconds: float, workers: int | None) -> str:
@@ -386,7 +389,6 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
     total = sum(study.points[p].trials for p in todo)
     reference = uses_reference(study, options)
     work = estimated_seconds(study, todo, reference)
-    in_process = in_calling_process(options, work)
     workers = planned_workers(study, todo, options, reference)
     note = getattr(study.system, "first_use_note", None)
     if todo and note is not None and not reference:
@@ -401,8 +403,7 @@ def run_study(study: Study, options: RunOptions = RunOptions(),
         with contextlib.ExitStack() as stack:
             # workers (and a dask scheduler) first: a scheduler that does not answer is
             # reported before any plan or progress bar is shown
-            n_jobs = None if in_process or not todo \
-                else stack.enter_context(_backend(options, gone))
+            n_jobs = None if workers == 0 else stack.enter_context(_backend(options, gone))
             if todo:
                 log.info("%s: %d of %d grid points to run, %s trials (%s)", h.name, len(todo),
                          len(study.points), f"{total:,}", plan_text(work, workers))

@@ -8,7 +8,7 @@ from typing import Any
 
 import pandas as pd
 
-from montecarlo.engine.runner import StudyResult
+from montecarlo.engine.runner import StudyResult, workers_text
 from montecarlo.output.plots import key_label, plot_metric
 
 
@@ -27,8 +27,7 @@ def _where(result: StudyResult) -> str:
     n = result.workers
     if n is None or len(result.resumed.get("points", [])) == len(result.points):
         return ""
-    return ", in the calling process" if n == 0 else \
-        f", on {n} worker process{'es' if n > 1 else ''}"
+    return ", " + workers_text(n)
 
 
 def markdown_table(frame: pd.DataFrame, floatfmt: str = ".4g") -> str:

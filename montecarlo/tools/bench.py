@@ -39,7 +39,7 @@ import psutil
 
 from montecarlo.engine.aggregate import N_BINS, PointStats, bin_index
 from montecarlo.engine.distributions import Streams
-from montecarlo.engine.runner import RunOptions, run_study
+from montecarlo.engine.runner import RunOptions, run_study, workers_text
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
 
@@ -326,9 +326,7 @@ def runner_rate(n: int, repeats: int, n_jobs: int | None = None) -> dict[str, An
 def runner_path(s: dict[str, Any]) -> str:
     """How the runner ran one row of the scaling series, in words."""
     path = "fused kernel" if s["kernel"] == "fast" else "literal reference"
-    n = s["workers"]
-    return f"{path}, in the calling process" if n == 0 else \
-        f"{path}, {n} worker process{'es' if n != 1 else ''}"
+    return f"{path}, {workers_text(s['workers'])}"
 
 
 STABILIZATION_WORKLOAD = {
