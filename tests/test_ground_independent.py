@@ -1,16 +1,22 @@
-"""``diagnose ground`` on data of a simulator written blind to this package.
+"""``diagnose ground`` on data of a second simulator written without this package.
 
-``tests/independent/ground_blind.py`` was written by another author from the seed 000 text and
-the CSV format (``tests/independent/ground_format.md``) only, never this package's modules, docs
-or tests. Its conventions are its own reading of the paper (eq. 5's rotation order and signs,
-the image axes of eqs. 1 and 4), its noise is its own, and so are its hidden effects: radial
-distortion on focal-normalised coordinates, a shifted image centre, a focal-length error and a
-projection centre away from the survey origin. Its files are read here exactly as the command
-line reads them. Agreement therefore checks the conventions of the whole chain, not only the
-fit.
+``tests/independent/ground_second.py`` was written by another author from the seed 000 text and
+the brief beside it (``ground_second_brief.md``: the CSV format and a list of physical effects to
+hide) only: never this package's modules, docs, tests, defaults or list of candidate effects.
+Its conventions are its own reading of the paper (eq. 5's rotation order and signs, the image
+axes of eqs. 1 and 4), its layout (targets at sensor height over 80 % of the horizontal field,
+at 50 and 100 m, observed one after the other over 90 minutes), noise and hidden effects too.
+Its files are read here exactly as the command line reads them, so agreement checks the
+conventions of the whole chain, not only the fit.
 
-Its world is flat (no earth curvature, straight rays) where the base model has both; at its
-ranges (35-140 m) the difference is under 1e-5 rad, a few hundredths of the 0.3 px noise.
+Two of its hidden effects are among our candidates (an image-centre shift, a common error of the
+surveyed heights); three are not: a focal length that drifts with time (thermal), fifth-order
+radial distortion alone (no third-order term) and a centroid bias toward the image centre that
+grows as 1/range. For those the right answer is "a misfit no candidate explains", or an effect
+the data cannot tell from the hidden one; naming an unrelated effect is wrong.
+
+Its world is flat (no earth curvature, straight rays): the model runs with a refraction
+coefficient of 1, where the ray bends exactly with the earth.
 """
 
 from __future__ import annotations
@@ -20,40 +26,43 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from montecarlo.discrepancy import ground_effects as ge
 from montecarlo.discrepancy.engine import diagnose
 from montecarlo.geometry.camera import Camera
 from montecarlo.io.ground_csv import read_ground_csv
-from tests.independent import ground_blind as gb
+from tests.independent import ground_second as gs
 
-PIXEL_SIGMA, SURVEY_SIGMA = 0.3, 0.01
-"""The noise of every data set below [px], [m]."""
+PIXEL_SIGMA, SURVEY_SIGMA = 0.5, 0.03
+"""The second simulator's own default noise [px], [m]."""
 
-EFFECTS = {  # hidden effect -> the effects a diagnosis may name for it
-    "radial_k1": (-0.008, {("radial_distortion",)}),
-    "principal_point_px": ((1.5, -1.0), {("principal_point",)}),
-    "focal_scale": (0.003, {("focal_scale",)}),
-    # a lever arm is minus a common shift of all targets: with l_y = 0 the two biases
-    # (one parameter each) state it as well as the arm itself (docs/discrepancy.md)
-    "lever_arm_m": ((0.2, 0.0, 0.15), {("lever_arm",),
-                                       ("target_lateral_bias", "target_height_bias"),
-                                       ("target_height_bias", "target_lateral_bias")}),
+FLAT_WORLD = 1.0
+"""Refraction coefficient at which the model's ray follows the earth: the simulator's flat world."""
+
+IN_OUR_LIST = {  # hidden effect -> (value, the effects a diagnosis may name for it)
+    "principal_point_px": ((6.0, -4.0), {("principal_point",)}),
+    "height_datum_m": (0.6, {("target_height_bias",)}),
+}
+
+NOT_IN_OUR_LIST = {  # hidden effect -> (value, candidates that describe the same physics)
+    "focal_drift_per_hour": (1e-2, set()),
+    # k2 r^4 on a field whose normalised radius stays below 1 is close to k1 r^2: the radial
+    # family is the right physics, the order is not
+    "radial_k2": (-0.06, {"radial_distortion"}),
+    "centroid_bias_px": (2.0, set()),
 }
 
 
-def _diagnosis(tmp_path, angles, seed, effects=None, fov=(90.0, 90.0), pixels=(512, 512),
-               pixel_sigma=PIXEL_SIGMA, survey_sigma=SURVEY_SIGMA,
-               refraction_k=ge.STANDARD_REFRACTION):
-    """Simulate one data set blind, read its CSV as ``diagnose ground`` does and diagnose it."""
-    stem = tmp_path / f"set{seed}"
-    gb.simulate(stem, psi_deg=angles[0], theta_deg=angles[1], gamma_deg=angles[2],
-                fov_deg=fov, pixels=pixels, pixel_sigma_px=pixel_sigma,
-                survey_sigma_m=survey_sigma, seed=seed, effects=effects)
+def _diagnosis(tmp_path, seed, fov=(90.0, 90.0), pixels=(512, 512), pixel_sigma=PIXEL_SIGMA,
+               survey_sigma=SURVEY_SIGMA, **effects):
+    """Simulate one data set, read its CSV as ``diagnose ground`` does and diagnose it."""
+    out = gs.simulate_ground(str(tmp_path), f"set{seed}", seed=seed, fov_deg=fov, pixels=pixels,
+                             pixel_sigma_px=pixel_sigma, survey_sigma_m=survey_sigma, **effects)
     camera = Camera.from_degrees(fov[0], fov[1], pixels[0], pixels[1])
-    data = read_ground_csv(stem.with_suffix(".csv"), camera, ge.min_targets())
+    data = read_ground_csv(out["csv"], camera, ge.min_targets())
     return diagnose(ge.ground_problem(data, camera, max(pixel_sigma, 1e-3),
-                                      max(survey_sigma, 1e-6), refraction_k))
+                                      max(survey_sigma, 1e-6), FLAT_WORLD))
 
 
 def _angle_z(fit, angles_deg):
@@ -67,91 +76,110 @@ def _angle_z(fit, angles_deg):
 @pytest.mark.parametrize(("angles", "fov", "pixels"), [
     ((30.0, 20.0, 10.0), (90.0, 90.0), (512, 512)),  # seed 000, section 1.4
     ((-12.0, 7.5, -25.0), (60.0, 45.0), (1280, 960)),
-    ((3.0, -40.0, 55.0), (20.0, 15.0), (2048, 1536)),
+    ((3.0, 4.0, 55.0), (20.0, 15.0), (2048, 1536)),  # targets at sensor height: small pitch
 ])
-def test_noise_free_blind_data_give_the_blind_angles(tmp_path, angles, fov, pixels):
-    """Without noise the base model's fit returns the simulator's mounting angles to 1e-9 rad.
-    The model runs with a refraction coefficient of 1, where a ray bends exactly with the
-    earth (apparent height z - (1 - k) L^2 / (2 R) = z): the blind simulator's flat world.
-    With the standard 0.13 the pitch differs by 3-6 microradians, the curvature the blind
-    world lacks."""
-    d = _diagnosis(tmp_path, angles, 1, fov=fov, pixels=pixels, pixel_sigma=0.0,
-                   survey_sigma=0.0, refraction_k=1.0)
+def test_noise_free_second_data_give_its_angles(tmp_path, angles, fov, pixels):
+    """Without noise the base model's fit returns the simulator's mounting angles to 1e-9 rad
+    (measured: 6e-17) and names nothing: eq. 5, the image axes and the pinhole agree."""
+    out = gs.simulate_ground(str(tmp_path), "clean", psi_deg=angles[0], theta_deg=angles[1],
+                             gamma_deg=angles[2], fov_deg=fov, pixels=pixels,
+                             pixel_sigma_px=0.0, survey_sigma_m=0.0)
+    camera = Camera.from_degrees(fov[0], fov[1], pixels[0], pixels[1])
+    d = diagnose(ge.ground_problem(read_ground_csv(out["csv"], camera, ge.min_targets()),
+                                   camera, 1e-3, 1e-6, FLAT_WORLD))
     value = dict(zip(d.before.names, d.before.values, strict=True))
     got = [value[k] for k in ("psi", "theta", "gamma")]
     np.testing.assert_allclose(got, np.radians(angles), rtol=0, atol=1e-9)
     assert d.named == []
 
 
-@pytest.mark.parametrize("effect", list(EFFECTS))
-def test_each_hidden_effect_of_the_blind_simulator_is_named(tmp_path, effect):
-    value, expected = EFFECTS[effect]
-    d = _diagnosis(tmp_path, (30.0, 20.0, 10.0), 3, effects={effect: value})
-    assert tuple(d.named) in expected
-    assert d.after.p_value > 0.01
-    assert np.all(np.abs(_angle_z(d.after, (30.0, 20.0, 10.0))) < 4.0)
-
-
-@pytest.mark.parametrize(("effect", "fov", "pixels"), [
-    ("principal_point_px", (20.0, 15.0), (2048, 1536)),
-    ("radial_k1", (20.0, 15.0), (2048, 1536)),
-    ("principal_point_px", (60.0, 45.0), (1280, 960)),
-])
-def test_a_blind_effect_the_design_cannot_see_is_said_to_be_so(tmp_path, effect, fov, pixels):
-    """On a narrow field an image-centre shift is a turn of the mounting (the diagnosis says
-    it is absorbed by psi and theta), and k1 = -0.008 moves the field's edge by a quarter of a
-    pixel (its minimal detectable bias, MDB, is above 0.008); on a 60 x 45 deg field the
-    (1.5, -1.0) px shift is below its MDB. None is named, and the report's candidate table
-    says why."""
-    value, _ = EFFECTS[effect]
-    d = _diagnosis(tmp_path, (30.0, 20.0, 10.0), 2000, effects={effect: value}, fov=fov,
-                   pixels=pixels)
-    assert d.named == []
-    test = {t.name: t for t in d.steps[-1].tests}[
-        "principal_point" if effect == "principal_point_px" else "radial_distortion"]
-    if effect == "radial_k1":
-        assert test.status == "testable" and test.mdb["k1"] > abs(value)
-    elif fov[0] < 30.0:
-        assert test.status == "absorbed" and test.reason == "absorbed by psi, theta"
-    else:
-        assert test.status == "testable"
-        assert test.mdb["c_x"] > abs(value[0]) and test.mdb["c_z"] > abs(value[1])
-
-
-def test_blind_null_data_name_nothing_and_fit_the_angles(tmp_path):
-    """20 null sets at angles drawn around section 1.4's: nothing named (at alpha = 0.01 per
-    set, the chance of more than two false alarms in 20 is 1e-3); of the 60 angle errors at
-    most one beyond 3 sigma (expected 0.16; two or more 1.2 %) and none beyond 4.5 sigma
-    (4e-4 for all 60)."""
-    rng = np.random.default_rng(11)
+def test_second_null_data_name_nothing_and_fit_the_angles(tmp_path):
+    """12 null sets: nothing named in at least 11 (alpha = 0.01 per set: two or more false
+    alarms in 12 has probability 0.006), and of the 36 angle errors none beyond 4 sigma (the
+    chance of one is 0.002)."""
     named, z = 0, []
-    for i in range(20):
-        angles = np.array([30.0, 20.0, 10.0]) + rng.uniform(-5.0, 5.0, 3)
-        d = _diagnosis(tmp_path, angles, 100 + i)
+    for seed in range(12):
+        d = _diagnosis(tmp_path, 100 + seed)
         named += bool(d.named)
-        z.extend(np.abs(_angle_z(d.after, angles)))
-    assert named <= 2
-    assert sum(v > 3.0 for v in z) <= 1 and max(z) < 4.5
+        z.extend(np.abs(_angle_z(d.after, (30.0, 20.0, 10.0))))
+    assert named <= 1
+    assert max(z) < 4.0
+
+
+@pytest.mark.parametrize("effect", list(IN_OUR_LIST))
+def test_a_hidden_effect_in_our_list_is_named(tmp_path, effect):
+    """At about three times its minimal detectable bias (centre shift (6, -4) px, height datum
+    0.6 m at 0.5 px and 3 cm) the effect is named in at least 4 of 5 sets, never another."""
+    value, expected = IN_OUR_LIST[effect]
+    named = collections.Counter(tuple(_diagnosis(tmp_path, 200 + s, **{effect: value}).named)
+                                for s in range(5))
+    assert sum(n for k, n in named.items() if k in expected) >= 4, named
+    assert set(named) <= expected | {()}, named
+
+
+def _wrongly_named(named: list[str], allowed: set[str]) -> bool:
+    return bool(set(named) - allowed)
+
+
+def test_fifth_order_distortion_is_reported_as_radial_distortion(tmp_path):
+    """k2 = -0.06 alone (r' = r (1 + k2 r^4)): on this 90 deg field the base model's third-order
+    term absorbs it within the noise, and the diagnosis names radial distortion (the right family,
+    not the right order; its k1 is then an effective value), in each of 5 sets."""
+    value, _ = NOT_IN_OUR_LIST["radial_k2"]
+    for s in range(5):
+        d = _diagnosis(tmp_path, 300 + s, radial_k2=value)
+        assert "radial_distortion" in d.named
+        assert d.after.p_value > 1e-4
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the diagnosis names an effect of its list for a hidden effect outside it: a focal length "
+    "drifting 1 %/h over a 90-minute left-to-right sweep is named as an image-centre shift or "
+    "an aspect ratio, and the fit then passes; nothing tells it from a missing effect"))
+def test_a_focal_drift_is_not_named_as_another_effect(tmp_path):
+    value, allowed = NOT_IN_OUR_LIST["focal_drift_per_hour"]
+    wrong = sum(_wrongly_named(_diagnosis(tmp_path, 400 + s, focal_drift_per_hour=value).named,
+                               allowed) for s in range(5))
+    assert wrong <= 1
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a 2 px centroid bias toward the image centre, growing as 1/range, is named as a lever arm, "
+    "a focal scale or target biases (it is a range-dependent shift the list has no term for)"))
+def test_a_range_dependent_centroid_bias_is_not_named_as_another_effect(tmp_path):
+    value, allowed = NOT_IN_OUR_LIST["centroid_bias_px"]
+    wrong = sum(_wrongly_named(_diagnosis(tmp_path, 500 + s, centroid_bias_px=value).named,
+                               allowed) for s in range(5))
+    assert wrong <= 1
 
 
 @pytest.mark.slow
-def test_blind_acceptance_at_100_sets_per_case(tmp_path):
-    """100 sets per case, angles drawn around section 1.4's (about a minute). Null: nothing named in
-    at least 97 sets (alpha = 0.01: at most 3 false alarms is a 98 % bound), each angle within
-    2 sigma in 88-100 % of the sets (the 95 % binomial band of 100 sets is about 90.5-99 %; the
-    three angles' shares are correlated). Each hidden effect named as expected in at least 95
-    sets, the angles then within 2 sigma as often as without it."""
-    rng = np.random.default_rng(5)
-    for effect, (value, expected) in {"null": (None, {()}), **EFFECTS}.items():
+def test_second_simulator_acceptance_at_100_sets_per_case(tmp_path):
+    """100 sets per case. Null: nothing named in at least 96 (alpha = 0.01: five or more false
+    alarms has probability 0.003), each angle within 2 sigma in a share inside the two-sided
+    99 % binomial band around 95.45 % (87-100 of 100). Effects of our list: named as expected in
+    at least 90. Effects outside it: the shares named wrongly are printed (the figures the
+    validation record gives); the test asserts only the first two groups."""
+    band = stats.binom.interval(0.99, 100, 0.9545)
+    for case, (value, expected) in {"null": (None, {()}), **IN_OUR_LIST}.items():
         named, cover = collections.Counter(), np.zeros(3)
-        for i in range(100):
-            angles = np.array([30.0, 20.0, 10.0]) + rng.uniform(-5.0, 5.0, 3)
-            d = _diagnosis(tmp_path, angles, 1000 + i,
-                           effects=None if effect == "null" else {effect: value})
+        for s in range(100):
+            effects = {} if case == "null" else {case: value}
+            d = _diagnosis(tmp_path, 1000 + s, **effects)
             named[tuple(d.named)] += 1
-            cover += np.abs(_angle_z(d.after, angles)) <= 2.0
+            cover += np.abs(_angle_z(d.after, (30.0, 20.0, 10.0))) <= 2.0
         hits = sum(n for k, n in named.items() if k in expected)
-        print(f"{effect}: named as expected in {hits}/100 {dict(named)}; "
+        print(f"{case}: named as expected {hits}/100 {dict(named)}; "
               f"angles within 2 sigma {cover.astype(int).tolist()}/100")
-        assert hits >= (97 if effect == "null" else 95), (effect, named)
-        assert np.all(cover >= 88), (effect, cover)
+        assert hits >= (96 if case == "null" else 90), (case, named)
+        if case == "null":
+            assert np.all((cover >= band[0]) & (cover <= band[1])), cover
+    for case, (value, allowed) in NOT_IN_OUR_LIST.items():
+        named, wrong, misfit = collections.Counter(), 0, 0
+        for s in range(100):
+            d = _diagnosis(tmp_path, 2000 + s, **{case: value})
+            named[tuple(d.named)] += 1
+            wrong += _wrongly_named(d.named, allowed)
+            misfit += d.after.p_value < 0.01
+        print(f"{case}={value}: named wrongly in {wrong}/100, final misfit (p < 0.01) in "
+              f"{misfit}/100; {dict(named.most_common(4))}")
