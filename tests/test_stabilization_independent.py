@@ -10,6 +10,12 @@ pinhole). Each recording is written to a CSV and a truth JSON, read by
 (the command-line entry point, in this process) with the options taken from the truth file, and
 compared with the truth file.
 
+Chosen independently, its conventions are the estimator's: passive matrices, the IMU
+``R_y(δgy) R_x(δgx) R_z(δgz)``, the camera ``R_y(δpy) R_x(ε + δpx) R_z(η + δpz)`` with δpy the roll
+about the LOS, the image ``f (x/y, z/y)`` with f = (pixels/2)/tan(fov/2), the target fixed where
+the LOS points at t = 0, and the same reading of the misprinted δpx column of eq. (5) row 3
+(first test).
+
 Where its choices differ from the estimator's model:
 
 - gyro noise: its default loop (``continuous``) drives the gimbal with the noise-free rate and
@@ -22,6 +28,8 @@ Where its choices differ from the estimator's model:
 - its ``zoh`` loop (a sampled controller holding the rates) leaves a drift of tens of pixels
   without installation angles; the estimator reads the gimbal angles as recorded, so it needs
   no model of the loop (slow test).
+- without installation angles the camera roll δpy is not determined, and the diagnosis
+  reports it as a large angle (a strict xfail, slow).
 - frames with the target out of view are written as NaN; the reader refuses them.
 - no gyro bias: the three biases' truth is zero.
 
@@ -254,8 +262,9 @@ def test_the_second_simulators_own_scenario_in_full(tmp_path, capsys):
     parameters within 3.84 σ. The encoder noise the model lacks (5e-6 rad, 0.06 px) adds
     (f σ_enc)² (1 + cos² ε) / 2 to the image noise's variance per axis: χ²_red is 1.037 in
     expectation while the 99 % band reaches 1.034, so the global test fails about half the
-    time at this size (on this run: 1.0339 against 1.0336, detected). What the diagnosis must
-    then do is what it does: name no effect and no convention, leaving the misfit unexplained."""
+    time at this size (with the simulator's seed 3: 1.0339 against 1.0336, detected). What
+    the diagnosis must then do is what it does: name no effect and no convention, leaving the
+    misfit unexplained."""
     path, truth = _record(tmp_path, 16, duration_s=60.0, rate_hz=100.0)
     est = _run(capsys, "stabilization", "estimate", str(path), *_options(truth))
     z = _z(est, truth)
@@ -304,9 +313,10 @@ def test_sigma_is_honest_on_independent_recordings(tmp_path, capsys):
 @pytest.mark.slow
 def test_sigma_on_recordings_of_a_sampled_loop(tmp_path, capsys):
     """The second simulator's ``zoh`` loop: a controller sampled at the recording's rate, fed
-    with the recorded (noisy) gyro and encoder values, rates held over each sample. Its gimbal
-    angles drift from eq. (4)'s (tens of pixels without installation angles), but the estimator
-    predicts the image from the recorded angles, so the same χ² check holds."""
+    with the recorded (noisy) gyro and encoder values, rates held over each sample. Its LOS
+    drifts without installation angles (44 px in 20 s at 50 Hz, 22 px in 60 s at 100 Hz,
+    noise-free), but the estimator predicts the image from the recorded gimbal angles, so the
+    same χ² check holds."""
     z = _random_runs(tmp_path, capsys, 20, 2027, loop="zoh")
     z2, (lo, hi) = _chi2_sums(z)
     assert np.all((lo < z2) & (z2 < hi)), dict(zip(PARAMETERS, (z2 / len(z)).round(2),
