@@ -31,6 +31,8 @@ Where its choices differ from the estimator's model:
 - without installation angles the camera roll δpy is not determined, and the diagnosis
   reports it as a large angle (a strict xfail, slow).
 - frames with the target out of view are written as NaN; the reader refuses them.
+- a recording with an image axis the other way round is named so, and effects fitted to it as
+  it is are named beside (a strict xfail).
 - no gyro bias: the three biases' truth is zero.
 
 Tolerances come from the estimator's σ: with honest σ each ``(estimate - truth) / σ`` is
@@ -226,20 +228,41 @@ def _other_convention(path, column: str, name: str):
     return out
 
 
-def test_an_image_axis_the_other_way_is_named(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def image_axis_diagnosis(tmp_path_factory) -> dict:
+    """``diagnose stabilization`` of an 8 s run at 25 Hz with its image z axis pointing down."""
+    folder = tmp_path_factory.mktemp("image_axis")
+    path, truth = _record(folder, 14, **SHORT)
+    other = _other_convention(path, "los_z_px", "other")
+    out = folder / "diagnosis.json"
+    assert main(["diagnose", "stabilization", str(other), *_options(truth), "--json",
+                 str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+def test_an_image_axis_the_other_way_is_named(image_axis_diagnosis):
     """Image z pointing down: the model does not fit (global test failed, χ²_red far above its
     band); the refits with z negated, and with x negated, pass with small angles and both are
     named (negating both image axes is a half turn of the image, which the model explains by
     negating the four combinations)."""
-    path, truth = _record(tmp_path, 14, **SHORT)
-    other = _other_convention(path, "los_z_px", "other")
-    d = _run(capsys, "diagnose", "stabilization", str(other), *_options(truth))
+    d = image_axis_diagnosis
     assert d["detected"]
     assert d["gap"]["before"]["chi2_red"] > 10.0 * d["chi2_red_band_99"]["before"][1]
     c = d["conventions"]
     assert c["checked"] and c["named"] == ["los_x_px", "los_z_px"]
     for column in ("los_x_px", "los_z_px"):
         assert c["fits"][column]["p_value"] > 0.01 and not c["fits"][column]["large_angles_deg"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the search for effects runs on the recording as it is, before and regardless of the "
+    "convention check: on this run it also names gyro_scale_factor, servo_lag and "
+    "gyro_time_delay (with los_x_px negated instead: servo_lag, inner_gimbal_mount, "
+    "gyro_scale_factor, gyro_time_delay), effects fitted to data in another convention"))
+def test_a_named_convention_comes_without_effects(image_axis_diagnosis):
+    """When a single sign change makes the model fit, no effect should be named beside it."""
+    assert image_axis_diagnosis["conventions"]["named"]
+    assert image_axis_diagnosis["named_effects"] == []
 
 
 @pytest.mark.slow
