@@ -207,7 +207,8 @@ def test_updates_come_every_kf_interval_steps():
 
 def test_nees_by_hand():
     cov = ta.CovarianceHistory(np.array([1.0]), np.diag([4.0, 9.0])[None], np.zeros((1, 2, 1)))
-    res = ta.MonteCarloResult(cov, np.zeros((1, 2, 3)), np.array([[2.0, 3.0], [1.0, 0.0]]))
+    res = ta.MonteCarloResult(cov, np.zeros((1, 2, 3)), np.array([[2.0, 3.0], [1.0, 0.0]]),
+                             np.zeros((2, 3)))
     np.testing.assert_allclose(res.nees(), [2.0, 0.25], rtol=1e-15)
 
 
