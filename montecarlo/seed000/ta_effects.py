@@ -202,7 +202,8 @@ def lever_arm_velocity(C_bn: ArrayLike, omega_b: ArrayLike, dl_b: ArrayLike) -> 
     dl_b : (..., 3) [m]
         Lever arm error, body axes.
     """
-    return np.einsum("...ij,...j->...i", C_bn, np.cross(omega_b, dl_b))
+    w, dl = np.asarray(omega_b, float), np.asarray(dl_b, float)
+    return np.einsum("...ij,...j->...i", np.asarray(C_bn, float), np.cross(w, dl))
 
 
 def gauss_markov2_transition(beta: float, sigma: float, dt: float

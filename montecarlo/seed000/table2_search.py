@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -65,13 +66,13 @@ EFFECTS = (
 )
 """The family searched: each effect's coarse grid, in the unit it is printed in."""
 
-_RATES = dict(dt=0.1, kf_interval=2)
-_WING_ROCK = dict(manoeuvre="wing_rock", bank=float(np.radians(20.0)), period=10.0)
-VARIANTS: dict[str, dict[str, object]] = {
-    "velocity, S-turn": dict(manoeuvre="s_turn", attitude_matching=False, **_RATES),
-    "velocity + attitude, S-turn": dict(manoeuvre="s_turn", attitude_matching=True, **_RATES),
-    "velocity, wing rock": dict(attitude_matching=False, **_WING_ROCK, **_RATES),
-    "velocity + attitude, wing rock": dict(attitude_matching=True, **_WING_ROCK, **_RATES),
+_S_TURN = ta.AlignmentConfig(dt=0.1, kf_interval=2)
+_WING_ROCK = replace(_S_TURN, manoeuvre="wing_rock", bank=float(np.radians(20.0)), period=10.0)
+VARIANTS = {
+    "velocity, S-turn": _S_TURN,
+    "velocity + attitude, S-turn": replace(_S_TURN, attitude_matching=True),
+    "velocity, wing rock": _WING_ROCK,
+    "velocity + attitude, wing rock": replace(_WING_ROCK, attitude_matching=True),
 }
 """Matching and manoeuvre variants, 120 s each: S-turn ±30° bank, 60 s period; wing rock ±20°,
 10 s period. IMU at 10 Hz and Kalman updates at 5 Hz (the default's 50 Hz IMU changes the
@@ -163,7 +164,7 @@ def all_responses(runs: int = 30, seed: int = 0, n_jobs: int = 2
 
     def job(variant: str, i: int, s: np.random.SeedSequence) -> RowResponses:
         row = TABLE2_ROWS[i]
-        cfg = grade_config(row.gyro_drift, row.accel_bias, ta.AlignmentConfig(**VARIANTS[variant]))
+        cfg = grade_config(row.gyro_drift, row.accel_bias, VARIANTS[variant])
         return row_responses(cfg, s, runs)
 
     out = Parallel(n_jobs=n_jobs)(delayed(job)(v, i, s) for (v, i), s in
@@ -263,7 +264,7 @@ def confirm(variant: str, params: dict[str, float], runs: int = 200, seed: int =
 
     def job(i: int, s: np.random.SeedSequence) -> dict[str, float]:
         row = TABLE2_ROWS[i]
-        cfg = grade_config(row.gyro_drift, row.accel_bias, ta.AlignmentConfig(**VARIANTS[variant]))
+        cfg = grade_config(row.gyro_drift, row.accel_bias, VARIANTS[variant])
         err = ta.simulate(cfg, np.random.default_rng(s), runs, effects).final_error("master")
         heading2, level2 = err[:, 2] ** 2, err[:, 0] ** 2 + err[:, 1] ** 2
         out = {}
@@ -280,7 +281,7 @@ def confirm(variant: str, params: dict[str, float], runs: int = 200, seed: int =
 
 
 def explain_table2(runs: int = 30, confirm_runs: int = 200, seed: int = 0, n_jobs: int = 2,
-                   max_effects: int = 3) -> dict[str, object]:
+                   max_effects: int = 3) -> dict[str, Any]:
     """Search, then confirm the closest configuration; everything :func:`format_explanation`
     prints."""
     responses = all_responses(runs, seed, n_jobs)
@@ -296,12 +297,12 @@ def _fmt_params(params: dict[str, float]) -> str:
     return ", ".join(f"{k} {v / by[k].scale:g} {by[k].unit}" for k, v in params.items()) or "none"
 
 
-def format_explanation(ex: dict[str, object]) -> str:
+def format_explanation(ex: dict[str, Any]) -> str:
     """The report of ``montecarlo transfer-alignment --table2``."""
-    found: pd.DataFrame = ex["found"]  # type: ignore[assignment]
+    found: pd.DataFrame = ex["found"]
     best = ex["best"]
-    check: pd.DataFrame = ex["check"]  # type: ignore[assignment]
-    cfg = ta.AlignmentConfig(**VARIANTS[best.variant])  # type: ignore[attr-defined]
+    check: pd.DataFrame = ex["check"]
+    cfg = VARIANTS[best.variant]
     tol = 0.5
     lines = [
         "Seed 000, Table 2 explained: the closest configuration in the modelled family",
@@ -309,8 +310,8 @@ def format_explanation(ex: dict[str, object]) -> str:
         f"to {ex['max_effects']}, {len(VARIANTS)} matching/manoeuvre variants; one "
         "configuration for all five rows, the filter tuned to each row's grade; scored by the "
         "worst |ours - paper| over rows and columns.",
-        f"Variant: {best.variant}. Filter: " + describe(cfg) + ".",  # type: ignore[attr-defined]
-        f"Unmodelled effects: {_fmt_params(best.params)}; true lever arm {LEVER_ARM} m "  # type: ignore[attr-defined]
+        f"Variant: {best.variant}. Filter: " + describe(cfg) + ".",
+        f"Unmodelled effects: {_fmt_params(best.params)}; true lever arm {LEVER_ARM} m "
         "(right, forward, up), compensated.",
         f"Errors relative to the master INS; rms over {int(check.runs.iloc[0])} Monte Carlo runs "
         "(± its standard error), 'pred' = the search's superposition, 'one' = run 0 alone.",
@@ -328,19 +329,19 @@ def format_explanation(ex: dict[str, object]) -> str:
         worst_mc = max(worst_mc, abs(gap_h), abs(gap_l))
         lines.append(
             f"{row.gyro_deg_h:>5.2f} {row.accel_g:>6.0e} | {row.heading_arcmin:>7.0f} "
-            f"{best.heading[i]:>5.2f} {c.heading_mc:>5.2f}±{c.heading_se:<4.2f} "  # type: ignore[attr-defined]
-            f"{c.heading_one_run:>5.2f} | {row.level_arcmin:>5.0f} {best.level[i]:>5.2f} "  # type: ignore[attr-defined]
+            f"{best.heading[i]:>5.2f} {c.heading_mc:>5.2f}±{c.heading_se:<4.2f} "
+            f"{c.heading_one_run:>5.2f} | {row.level_arcmin:>5.0f} {best.level[i]:>5.2f} "
             f"{c.level_mc:>5.2f}±{c.level_se:<4.2f} {c.level_one_run:>5.2f} | "
             f"{max(abs(gap_h), abs(gap_l)):>5.2f}")
     lines += ["", ("All five rows within ±0.5′ plus 2 Monte Carlo standard errors." if holds else
                    f"Not reproduced: worst gap {worst_mc:.2f}′ (Monte Carlo), "
-                   f"{best.worst_gap_arcmin:.2f}′ (superposition) against ±0.5′."),  # type: ignore[attr-defined]
+                   f"{best.worst_gap_arcmin:.2f}′ (superposition) against ±0.5′."),
               "", "Closest per number of effects (worst gap [arcmin], superposition):"]
     for size, sub in found.groupby("size"):
         top = sub.iloc[0]
         lines.append(f"  {size}: {top.worst_gap_arcmin:5.2f}  {top.variant}; "
                      f"{_fmt_params(top.params)}")
-    ratios: pd.DataFrame = ex["ratios"]  # type: ignore[assignment]
+    ratios: pd.DataFrame = ex["ratios"]
     lines += ["", "Why: rows 2 -> 3 halve the accelerometer bias; Table 2 divides heading by "
               f">= {PAPER_RATIO_2_3['heading']:.2f} and level by >= "
               f"{PAPER_RATIO_2_3['level']:.2f}. Any configuration's ratio is at most its "
