@@ -79,6 +79,10 @@ VARIANTS = {
 filter's final 1σ by under 1 %, tests/test_table2_search.py), to keep the search cheap."""
 
 
+SAMPLED = ("time_jitter", "flexure_sigma", "vibration_amplitude")
+"""Effects whose second moments come from sampled paths (the others are exact)."""
+
+
 @dataclass(frozen=True)
 class RowResponses:
     """Unit responses of one (variant, row): diagonal second moments of (E, N, U) [rad²]."""
@@ -141,7 +145,7 @@ def row_responses(cfg: ta.AlignmentConfig, seed: np.random.SeedSequence, runs: i
     for e in EFFECTS[1:]:
         block = err[where[e.name]]
         # the master's errors and the sensors: one run per axis (sum of squares), others sampled
-        sampled = e.name in ("time_jitter", "flexure_sigma", "vibration_amplitude")
+        sampled = e.name in SAMPLED
         second[e.name] = (np.mean(block**2, axis=0) if sampled else np.sum(block**2, axis=0)
                           ) / e.scale**2
     return RowResponses(matched, err[where["time_offset"]][0] / EFFECTS[0].scale, second)
@@ -289,6 +293,7 @@ def explain_table2(runs: int = 30, confirm_runs: int = 200, seed: int = 0, n_job
     best = found.iloc[0]
     check = confirm(best.variant, best.params, confirm_runs, seed + 1, n_jobs)
     return {"found": found, "best": best, "check": check, "ratios": source_ratios(responses),
+            "responses": responses,
             "runs": runs, "seed": seed, "max_effects": max_effects}
 
 
