@@ -112,7 +112,7 @@ def test_table2_explanation_end_to_end():
     superposition's own from its sampled effects: a second moment from n Gaussian paths has
     relative standard error sqrt(2/n)); and the bound says why no configuration closes
     rows 2 -> 3 in every variant."""
-    runs = 20
+    runs = 100
     ex = ts.explain_table2(runs=runs, confirm_runs=200, seed=3)
     best, check = ex["best"], ex["check"]
     resp = ex["responses"][best.variant]

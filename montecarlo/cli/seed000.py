@@ -124,8 +124,8 @@ def _add_transfer_alignment_commands(sub: argparse._SubParsersAction) -> None:
                    "errors, scale factors) that come closest to Table 2, one configuration for "
                    "all five rows; the manoeuvre flags are then ignored and --trials is the "
                    "confirming Monte Carlo's runs per row")
-    p.add_argument("--response-runs", type=positive_int, default=30,
-                   help="with --table2: sampled paths per random effect (default 30)")
+    p.add_argument("--response-runs", type=positive_int, default=100,
+                   help="with --table2: sampled paths per random effect (default 100)")
     p.add_argument("--jobs", type=positive_int, default=2,
                    help="with --table2: parallel workers (default 2; same numbers for any)")
     p.set_defaults(func=_cmd_transfer_alignment)

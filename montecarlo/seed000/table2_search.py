@@ -160,7 +160,7 @@ def predict(resp: RowResponses, params: dict[str, float]) -> tuple[float, float]
     return float(np.sqrt(m[2])), float(np.sqrt(m[0] + m[1]))
 
 
-def all_responses(runs: int = 30, seed: int = 0, n_jobs: int = 2
+def all_responses(runs: int = 100, seed: int = 0, n_jobs: int = 2
                   ) -> dict[str, list[RowResponses]]:
     """Unit responses for every variant and Table 2 row (parallel; same numbers any n_jobs)."""
     tasks = [(v, i) for v in VARIANTS for i in range(len(TABLE2_ROWS))]
@@ -284,7 +284,7 @@ def confirm(variant: str, params: dict[str, float], runs: int = 200, seed: int =
     return pd.DataFrame(out).assign(runs=runs)
 
 
-def explain_table2(runs: int = 30, confirm_runs: int = 200, seed: int = 0, n_jobs: int = 2,
+def explain_table2(runs: int = 100, confirm_runs: int = 200, seed: int = 0, n_jobs: int = 2,
                    max_effects: int = 3) -> dict[str, Any]:
     """Search, then confirm the closest configuration; everything :func:`format_explanation`
     prints."""
