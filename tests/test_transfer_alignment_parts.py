@@ -46,8 +46,11 @@ def test_limits_of_the_configuration_and_its_counts():
     assert ta.AlignmentConfig().n_states == 12
     assert ta.AlignmentConfig(attitude_matching=True).n_states == 15
     with pytest.raises(ValueError, match=r"manoeuvre 'loop' not in \('level', 's_turn', "
-                                         r"'wing_rock'\)"):
+                                         r"'wing_rock', 'surge'\)"):
         ta.AlignmentConfig(manoeuvre="loop")
+    with pytest.raises(ValueError, match=r"need \|surge\| < speed \(got 20.0 m/s, speed 20.0"):
+        ta.AlignmentConfig(manoeuvre="surge", speed=20.0)
+    assert ta.AlignmentConfig(manoeuvre="surge", speed=20.0 + 1e-9).surge == 20.0
 
 
 # --- small rotations ---------------------------------------------------------------------------

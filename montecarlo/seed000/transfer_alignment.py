@@ -96,7 +96,7 @@ class AlignmentConfig:
     period : float [s]
         Period of the S-turn (one left and one right turn), of the wing rock or of the surge.
     surge : float [m/s]
-        Speed amplitude of the surge (``|surge| < speed``).
+        Speed amplitude of the surge manoeuvre (``|surge| < speed``; unused otherwise).
     duration : float [s]
         Length of the alignment; results are the errors at its end.
     dt : float [s]
@@ -147,7 +147,7 @@ class AlignmentConfig:
         if not (self.period > 0 and self.speed > 0 and abs(self.bank) < np.pi / 2):
             raise ValueError(f"need period > 0 (got {self.period!r} s), speed > 0 (got "
                              f"{self.speed!r} m/s) and |bank| < 90° (got {self.bank!r} rad)")
-        if not abs(self.surge) < self.speed:
+        if self.manoeuvre == "surge" and not abs(self.surge) < self.speed:
             raise ValueError(f"need |surge| < speed (got {self.surge!r} m/s, speed "
                              f"{self.speed!r} m/s)")
         if self.kf_interval < 1 or self.dt <= 0 or self.duration < self.dt * self.kf_interval:
