@@ -255,3 +255,19 @@ def test_matched_effects_leave_the_monte_carlo_unchanged():
     a = ta.simulate(cfg, np.random.default_rng(7), 5)
     b = ta.simulate(cfg, np.random.default_rng(7), 5, te.TruthEffects())
     np.testing.assert_array_equal(a.phi, b.phi)
+
+
+def test_inflated_tuning_adds_the_lag_as_white_noise_by_hand():
+    """S-turn over whole periods: |a| = V w0 |sin|, mean square V² w0² / 2 over three axes, so
+    a lag tau widens each axis's velocity noise to sqrt(0.05² + tau² V² w0² / 6); the truth
+    keeps the master's noise at 0.05 m/s."""
+    cfg = ta.AlignmentConfig(duration=120.0, **FAST)
+    tau = 0.04
+    tuned, truth = te.inflated_tuning(cfg, te.TruthEffects(time_offset=tau), ta.make_truth(cfg))
+    w0 = G0 * np.tan(cfg.bank) / cfg.speed
+    want = np.sqrt(0.05**2 + tau**2 * cfg.speed**2 * w0**2 / 6)
+    assert tuned.velocity_noise == pytest.approx(want, rel=1e-3)  # finite-difference a
+    assert tuned.attitude_noise == cfg.attitude_noise
+    assert truth.sensor(cfg)["velocity_noise"] == 0.05
+    same, _ = te.inflated_tuning(cfg, te.TruthEffects(), ta.make_truth(cfg))
+    assert same == cfg
