@@ -524,3 +524,20 @@ def test_coarse_histogram_counts_magnitudes_in_32_bins_per_octave():
     assert counts.tolist() == [2, 1, 2, 1, 1, 1, 2]
     assert (lower[0], upper[0], lower[-1], upper[-1]) == (0.0, 2.0**-40, 2.0**16, np.inf)
     assert upper[2] == 1.0 + 1 / 32 and lower[2] == 1.0
+
+
+@pytest.mark.parametrize(("values", "limit", "verdict"), [
+    ([3.0, 4.0], 3.6, "meets"),  # rms sqrt(12.5) = 3.536 (the mean, 3.5, would also meet)
+    ([3.0, 4.0], 3.5, "fails"),  # ... but not 3.5, which the mean would meet
+    ([-3.0, 3.0], 2.9, "fails"),  # rms 3 of a zero-mean pair
+])
+def test_spec_rms_is_the_root_mean_square_by_hand(values, limit, verdict):
+    """rms = sqrt(mean of squares) over all trials (the 1σ of an RSS budget), no interval."""
+    ps = agg.PointStats()
+    ps.add_block(0, {("v", "m"): np.array(values)}, {"v": {"total": 0}}, len(values))
+    row = ps.summary({"m": False}, 0.95, agg.SpecCheck("m", None, "rms", limit)).iloc[0]
+    assert row["spec_value"] == pytest.approx(np.sqrt(np.mean(np.square(values))), rel=1e-15)
+    assert row["verdict"] == verdict
+    ps.add_block(1, {("v", "m"): np.array([np.nan])}, {"v": {"total": 1}}, 1)
+    row = ps.summary({"m": False}, 0.95, agg.SpecCheck("m", None, "rms", 100.0)).iloc[0]
+    assert row["spec_value"] == np.inf and row["verdict"] == "fails"

@@ -183,7 +183,7 @@ def test_kalman_source_draws_from_the_filter_covariance():
     params = {"ta_source": "kalman", "gyro_drift": 0.05 * units.DEG_PER_HOUR,
               "accel_bias": 5e-4 * units.G0}
     out = air.run_trials(params, np.random.default_rng(9), n)
-    P = air.transfer_alignment_covariance({**air.DEFAULT_PARAMS, **params})
+    _, P = air.transfer_alignment_moments({**air.DEFAULT_PARAMS, **params})
     ratio = np.mean(out["heading_error"] ** 2) / P[2, 2]
     lo, hi = stats.chi2.ppf([0.0005, 0.9995], n) / n
     assert lo < ratio < hi

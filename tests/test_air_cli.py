@@ -51,3 +51,24 @@ def test_bad_flags_exit_2_with_one_line(args):
     assert out.returncode == 2
     assert out.stderr.count("\n") == 1, out.stderr
     assert "Traceback" not in out.stderr
+
+
+@pytest.mark.slow
+def test_transfer_alignment_table2_json_gives_the_search_and_its_check():
+    """--table2: the configuration comes from the search (SI values of the effects it chose),
+    five confirmed rows and the source ratios of every variant."""
+    out = run_cli("transfer-alignment", "--table2", "--json", "--trials", "20",
+                  "--response-runs", "5", "--jobs", "1")
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout)
+    assert len(res["rows"]) == 5 and res["worst_gap_arcmin_superposition"] >= 0
+    assert set(res["params_si"]) <= {"time_offset", "time_jitter", "lever_arm_error",
+                                     "flexure_sigma", "vibration_amplitude", "master_heading",
+                                     "master_level", "master_velocity", "gyro_scale",
+                                     "accel_scale"}
+    assert {r["variant"] for r in res["ratios"]} >= {"velocity, S-turn"}
+
+
+def test_transfer_alignment_table2_bad_jobs_exit_2():
+    out = run_cli("transfer-alignment", "--table2", "--jobs", "0")
+    assert out.returncode == 2 and "--jobs" in out.stderr and "Traceback" not in out.stderr

@@ -46,8 +46,11 @@ def test_limits_of_the_configuration_and_its_counts():
     assert ta.AlignmentConfig().n_states == 12
     assert ta.AlignmentConfig(attitude_matching=True).n_states == 15
     with pytest.raises(ValueError, match=r"manoeuvre 'loop' not in \('level', 's_turn', "
-                                         r"'wing_rock'\)"):
+                                         r"'wing_rock', 'surge'\)"):
         ta.AlignmentConfig(manoeuvre="loop")
+    with pytest.raises(ValueError, match=r"need \|surge\| < speed \(got 20.0 m/s, speed 20.0"):
+        ta.AlignmentConfig(manoeuvre="surge", speed=20.0)
+    assert ta.AlignmentConfig(manoeuvre="surge", speed=20.0 + 1e-9).surge == 20.0
 
 
 # --- small rotations ---------------------------------------------------------------------------
@@ -207,7 +210,8 @@ def test_updates_come_every_kf_interval_steps():
 
 def test_nees_by_hand():
     cov = ta.CovarianceHistory(np.array([1.0]), np.diag([4.0, 9.0])[None], np.zeros((1, 2, 1)))
-    res = ta.MonteCarloResult(cov, np.zeros((1, 2, 3)), np.array([[2.0, 3.0], [1.0, 0.0]]))
+    res = ta.MonteCarloResult(cov, np.zeros((1, 2, 3)), np.array([[2.0, 3.0], [1.0, 0.0]]),
+                             np.zeros((2, 3)))
     np.testing.assert_allclose(res.nees(), [2.0, 0.25], rtol=1e-15)
 
 

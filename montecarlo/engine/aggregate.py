@@ -479,6 +479,10 @@ class PointStats:
                 m.superquantile(level, of_abs, confidence)
             if not sampled:
                 lo = hi = value
+        elif stat == "rms":  # sqrt(E[x²]), the 1σ of an RSS budget; no interval
+            n, mean, m2 = m.moments()
+            value = math.inf if censored else math.sqrt(mean**2 + m2 / n) if n else math.nan
+            lo = hi = value
         else:  # mean, std, max: no interval; any trial without a value fails the spec
             # (a signed metric's mean by its magnitude: a bias of either sign counts)
             value = math.inf if censored else abs(row[stat]) if of_abs else row[stat]

@@ -11,7 +11,7 @@ Layout of a study file::
 
     [spec]                       # optional requirement drawn on plots and checked in reports
     metric = "rotation_angle"; variant = "normalised"; statistic = "p95"; limit = 3.0
-    # statistic: p50/p90/p95/p99, mean, std, max, or cvar95 (mean of the worst 5 %; any cvarNN)
+    # statistic: p50/p90/p95/p99, mean, std, rms, max, or cvar95 (mean of the worst 5 %; any cvarNN)
 
     ... the system's own sections (e.g. [sensor], [geometry], [errors] for "ground") ...
 
@@ -90,10 +90,10 @@ class Spec(Strict):
     metric: str
     variant: str | None = None
     statistic: str = Field(default="p95",
-                           pattern=r"^(mean|std|p50|p90|p95|p99|max|cvar[1-9][0-9]?)$")
-    """A percentile, mean, std, max, or ``cvarNN``: the mean of the worst (100 - NN) %. Of a
-    signed (per-axis) metric, the percentiles, ``cvarNN`` and max are of its magnitude and the
-    mean is judged by its magnitude, the bias ``abs(mean)``."""
+                           pattern=r"^(mean|std|rms|p50|p90|p95|p99|max|cvar[1-9][0-9]?)$")
+    """A percentile, mean, std, rms (sqrt of the mean square), max, or ``cvarNN``: the mean of
+    the worst (100 - NN) %. Of a signed (per-axis) metric, the percentiles, ``cvarNN`` and max
+    are of its magnitude and the mean is judged by its magnitude, the bias ``abs(mean)``."""
     limit: float = Field(gt=0)
 
     def statistic_label(self, signed: bool) -> str:

@@ -65,4 +65,9 @@ def figure_caption(result: StudyResult, name: str) -> str:
         return (f"{stat} of {what}{over}, over range L [m] × height difference H [m]; colour "
                 f"and numbers in {unit}, red contour at the spec limit. {pixel}"
                 f"{_spec_text(study)}")
+    if stem == "map_sync_survey":
+        stat = study.spec.statistic if study.spec else "p95"
+        return (f"{stat} of {what} over lever-arm knowledge [m] × master time-tag offset [s], "
+                f"one panel per value of the other swept keys; colour and numbers in {unit}, "
+                f"red contour at the spec limit. {_spec_text(study)}")
     return f"{what}. {pixel}{_spec_text(study)}"

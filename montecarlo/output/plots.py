@@ -30,6 +30,9 @@ KEY_LABELS = {
     "errors.dh_m.sigma": ("σ_δb", "height-scale error σ [m]"),
     "errors.pixel_relation": ("pixel error", "pixel error between targets"),
     "errors.evaluation": ("", "evaluation"),
+    "params.ta_time_offset_s": ("time tag", "master time-tag offset [s]"),
+    "params.ta_lever_arm_error_m": ("lever arm", "lever-arm knowledge ± [m]"),
+    "params.ta_duration_s": ("alignment", "alignment length [s]"),
 }
 MAX_LINES = 12
 UNIT_SUFFIXES = ("deg_per_root_h", "deg_per_h", "deg_per_s", "arcsec", "arcmin", "mrad", "deg",
@@ -348,12 +351,18 @@ def histogram_figure(result: StudyResult, summary: pd.DataFrame, max_panels: int
     return fig
 
 
-def lh_map_figure(result: StudyResult, summary: pd.DataFrame) -> Figure | None:
-    """Map of the spec statistic over range L x height difference H, with the spec contour."""
+MAPS = (("geometry.L_m", "geometry.H_m", "map_L_H.png"),
+        ("params.ta_lever_arm_error_m", "params.ta_time_offset_s", "map_sync_survey.png"))
+"""Sweep-key pairs drawn as a map when both are swept: (x key, y key, file name)."""
+
+
+def lh_map_figure(result: StudyResult, summary: pd.DataFrame, L: str = "geometry.L_m",
+                  H: str = "geometry.H_m") -> Figure | None:
+    """Map of the spec statistic over two swept keys (by default range L x height difference
+    H), with the spec contour; one panel per value of the other keys (up to 4)."""
     study = result.study
     keys = study.sweep_keys
     partners = _zip_partners(study)
-    L, H = "geometry.L_m", "geometry.H_m"
     if L not in keys or H not in keys or partners[L] != (L,) or partners[H] != (H,) \
             or {L, H} & _oat_keys(study):
         return None
@@ -412,7 +421,8 @@ def lh_map_figure(result: StudyResult, summary: pd.DataFrame) -> Figure | None:
                      fontsize=9, pad=14)
     over = "\nover all trials (no solution = ∞)" if study.spec else ""
     fig.colorbar(mesh, ax=list(axes), label=f"{stat} of {m.label}, {variant} [{m.unit}]{over}")
-    fig.suptitle(f"{study.header.name}: {stat} over L × H"
+    x_name, y_name = ((KEY_LABELS[k][0] if k in KEY_LABELS else _split_key(k)[0]) for k in (L, H))
+    fig.suptitle(f"{study.header.name}: {stat} over {x_name} × {y_name}"
                  + (f" (red: {_spec_text(study)})" if study.spec else ""), fontsize=10)
     return fig
 
@@ -421,9 +431,10 @@ def all_figures(result: StudyResult, summary: pd.DataFrame) -> list[tuple[str, F
     """Every plot of a study, as (file name, figure)."""
     figures = trend_figures(result, summary)
     figures.append(("histograms.png", histogram_figure(result, summary)))
-    lh = lh_map_figure(result, summary)
-    if lh is not None:
-        figures.append(("map_L_H.png", lh))
+    for x, y, name in MAPS:
+        fig = lh_map_figure(result, summary, x, y)
+        if fig is not None:
+            figures.append((name, fig))
     return figures
 
 
@@ -474,7 +485,9 @@ def metric_axes(result: StudyResult, summary: pd.DataFrame, metric: str | None =
     p95_interval(ax, x, data, "C0", f"{study.header.confidence:.0%} CI of p95")
     if study.spec and study.spec.metric == metric and study.spec.variant in (None, variant):
         if study.spec.statistic not in ("p50", "p95", "p99"):
-            ax.plot(x, data[study.spec.statistic], "x", color="C3", label=study.spec.statistic)
+            stat = study.spec.statistic
+            ax.plot(x, data["spec_value" if stat == "rms" else stat], "x", color="C3",
+                    label=stat)
         ax.axhline(study.spec.limit, color="k", lw=1, ls="-.", label=_spec_text(study))
     ax.set_ylabel(f"{m.label} [{m.unit}]")
     ax.set_ylim(bottom=0)

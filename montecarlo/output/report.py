@@ -51,7 +51,7 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
     The verdict is judged on the statistic over all trials, a trial without a value counting as
     larger than the limit (``spec_value``, ``spec_lo``, ``spec_hi`` of the summary): 'meets'
     needs the whole confidence interval at or below the limit, 'fails' the whole interval
-    above; otherwise the trials do not decide ('undecided'). For max, mean and std no interval
+    above; otherwise the trials do not decide ('undecided'). For max, mean, std and rms no interval
     is computed and the value alone decides; a sampled max comes with the fraction of all
     possible trials it bounds at the study's confidence (Wilks). Where the trials enumerate the
     worst-case corners, the statistic is exact and has no interval.
@@ -64,7 +64,11 @@ def spec_verdicts(result: StudyResult, summary: pd.DataFrame) -> pd.DataFrame | 
     stat = spec.statistic
     judged = spec.statistic_label(study.metric(spec.metric).signed)
     out = sel[["point", *study.sweep_keys, "variant", "trials", "invalid_fraction"]].copy()
-    out[f"{judged} (valid trials)"] = sel[stat].abs() if judged != stat else sel[stat]
+    if stat == "rms":  # sqrt(mean² + population variance) of the valid trials
+        valid = (sel["mean"] ** 2 + sel["std"] ** 2 * (sel["count"] - 1) / sel["count"]) ** 0.5
+    else:
+        valid = sel[stat].abs() if judged != stat else sel[stat]
+    out[f"{judged} (valid trials)"] = valid
     out[f"{judged} (all trials)"] = sel["spec_value"]
     if stat.startswith(("p", "cvar")):
         out[f"{stat} CI"] = [f"[{a:.4g}, {b:.4g}]" if sampling == "random" else "exact"

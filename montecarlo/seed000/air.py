@@ -50,6 +50,7 @@ from scipy.spatial.transform import Rotation
 from montecarlo.errors import InputError
 from montecarlo.geometry.metrics import AXIS_METRICS, ROTATION_METRICS, all_metrics, error_matrix
 from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed000 import ta_budget
 from montecarlo.seed000 import table2 as t2
 from montecarlo.seed000 import transfer_alignment as ta
 from montecarlo.units import ARCMIN, DEG_PER_HOUR, G0, MRAD
@@ -88,6 +89,9 @@ DEFAULT_PARAMS: dict[str, float | int | str] = {
     "aircraft_heading": 0.0,
     "aircraft_pitch": 0.0,
     "aircraft_roll": 0.0,
+    "ta_duration": 120.0,
+    "ta_time_offset": 0.0,
+    "ta_lever_arm_error": 0.0,
 }
 """Defaults of :func:`run_trials` (SI units, radians); see its docstring."""
 
@@ -198,32 +202,48 @@ def table2_row(gyro_drift: float, accel_bias: float) -> t2.Table2Row:
         f"grade; Table 2 has {grades}")
 
 
-def transfer_alignment_covariance(params: Mapping[str, float | int | str]) -> FloatArray:
-    """Covariance (3, 3) [rad²] of the slave's (east, north, up) error for ``params``.
+def transfer_alignment_moments(params: Mapping[str, float | int | str]
+                               ) -> tuple[FloatArray, FloatArray]:
+    """Mean (3,) [rad] and covariance (3, 3) [rad²] of the slave's (east, north, up) error.
 
     ``ta_source = "sigmas"``: from ``heading_sigma``, ``level_sigma``, ``level_split``;
     ``"table2"``: the Table 2 row of (``gyro_drift``, ``accel_bias``), split by ``level_split``;
-    ``"kalman"``: the final attitude covariance of :func:`transfer_alignment.covariance_analysis`
-    for that IMU grade (default manoeuvre and sensors of ``AlignmentConfig``; full 3x3).
+    ``"kalman"``: our filter for that IMU grade (S-turn of ``ta_duration``, other settings as
+    ``AlignmentConfig``): its final covariance, plus the mean and covariance that a master
+    time-tag offset ``ta_time_offset`` and a lever arm known to ±``ta_lever_arm_error`` add
+    when the filter does not model them (:func:`ta_budget.error_moments`). Only "kalman" has a
+    mean.
     """
     source = params["ta_source"]
+    zero = np.zeros(3)
     if source == "sigmas":
-        return level_heading_covariance(float(params["heading_sigma"]),
-                                        float(params["level_sigma"]), str(params["level_split"]))
+        return zero, level_heading_covariance(float(params["heading_sigma"]),
+                                              float(params["level_sigma"]),
+                                              str(params["level_split"]))
     if source == "table2":
         row = table2_row(float(params["gyro_drift"]), float(params["accel_bias"]))
-        return level_heading_covariance(row.heading_arcmin * ARCMIN, row.level_arcmin * ARCMIN,
-                                        str(params["level_split"]))
+        return zero, level_heading_covariance(row.heading_arcmin * ARCMIN,
+                                              row.level_arcmin * ARCMIN,
+                                              str(params["level_split"]))
     if source == "kalman":
-        cfg = t2.grade_config(float(params["gyro_drift"]), float(params["accel_bias"]))
-        return ta.final_attitude_covariance(
-            replace(cfg, mount=(float(params["mount_psi"]), float(params["mount_theta"]),
-                                float(params["mount_gamma"]))))
+        base = replace(ta.AlignmentConfig(), duration=float(params["ta_duration"]),
+                       mount=(float(params["mount_psi"]), float(params["mount_theta"]),
+                              float(params["mount_gamma"])))
+        try:
+            cfg = t2.grade_config(float(params["gyro_drift"]), float(params["accel_bias"]),
+                                  base)
+        except ValueError as exc:
+            raise InputError(f"ta_duration: {exc}") from None
+        offset, arm = float(params["ta_time_offset"]), float(params["ta_lever_arm_error"])
+        if offset == 0.0 and arm == 0.0:
+            return zero, ta.final_attitude_covariance(cfg)
+        return ta_budget.error_moments(cfg, offset, arm)
     raise InputError(f"ta_source: {source!r} is not one of {TA_SOURCES}")
 
 
 _NON_NEGATIVE = ("heading_sigma", "level_sigma", "gyro_drift", "accel_bias", "install_bound",
-                 "master_heading_sigma", "master_level_sigma")
+                 "master_heading_sigma", "master_level_sigma", "ta_time_offset",
+                 "ta_lever_arm_error", "ta_duration")
 
 
 def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator, n: int
@@ -237,7 +257,7 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
 
         ``ta_source`` (str, "sigmas")
             Where the transfer-alignment accuracy comes from: "sigmas", "table2" or "kalman"
-            (see :func:`transfer_alignment_covariance`).
+            (see :func:`transfer_alignment_moments`).
         ``heading_sigma`` [rad], 3′; ``level_sigma`` [rad], 5′
             Transfer-alignment 1σ (used with "sigmas").
         ``level_split`` (str, "total")
@@ -254,6 +274,9 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
             True mounting angles (seed 000, section 1.4); they affect only per-axis errors.
         ``aircraft_heading``, ``aircraft_pitch``, ``aircraft_roll`` [rad], 0
             Aircraft attitude (Z-X-Y) at the calibration instant; per-axis errors only.
+        ``ta_duration`` [s], 120; ``ta_time_offset`` [s], 0; ``ta_lever_arm_error`` [m], 0
+            With "kalman": alignment length, master time-tag offset and lever-arm knowledge
+            bound (neither modelled by the filter).
     rng : numpy.random.Generator
         The only source of randomness.
     n : int
@@ -279,12 +302,12 @@ def run_trials(params: Mapping[str, float | int | str], rng: np.random.Generator
         if not float(p[key]) >= 0.0:
             raise InputError(f"{key}: {p[key]!r} must be a number >= 0")
     split = str(p["level_split"])
-    P_ta = transfer_alignment_covariance(p)
+    mean_ta, P_ta = transfer_alignment_moments(p)
     if np.count_nonzero(P_ta - np.diag(np.diagonal(P_ta))):
         factor = np.linalg.cholesky(P_ta)  # the filter's full covariance
     else:
         factor = np.diag(np.sqrt(np.diagonal(P_ta)))
-    phi_ta = rng.standard_normal((n, 3)) @ factor.T
+    phi_ta = mean_ta + rng.standard_normal((n, 3)) @ factor.T
     bound = float(p["install_bound"])
     install = rng.uniform(-bound, bound, size=(n, 3))
     P_m = level_heading_covariance(float(p["master_heading_sigma"]),

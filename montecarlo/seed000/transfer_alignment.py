@@ -45,19 +45,29 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
-from montecarlo.geometry.rotations import mounting_matrix
+from montecarlo.seed000.ta_effects import (
+    EffectDraws,
+    TruthEffects,
+    draw_effects,
+    lever_arm_velocity,
+)
+from montecarlo.seed000.ta_manoeuvres import (
+    GRAVITY_N,
+    MANOEUVRES,
+    Truth,
+    aircraft_motion,
+    make_truth,
+)
+from montecarlo.seed000.ta_manoeuvres import exp_so3 as _exp
+from montecarlo.seed000.ta_manoeuvres import log_so3 as _log
+from montecarlo.seed000.ta_manoeuvres import skew as _skew
 from montecarlo.units import DEG_PER_HOUR, G0
 
 FloatArray = NDArray[np.float64]
 
-GRAVITY_N = np.array([0.0, 0.0, -G0])
-"""Gravity in the east-north-up navigation frame [m/s²]."""
-
-MANOEUVRES = ("level", "s_turn", "wing_rock")
-"""Flight profiles: straight and level; S-turn (coordinated turns, turn rate sinusoidal in time,
-bank up to ``bank``); wing rock (roll oscillation of amplitude ``bank``, constant heading)."""
+__all__ = ["MANOEUVRES", "AlignmentConfig", "CovarianceHistory", "MonteCarloResult", "Truth",
+           "aircraft_motion", "covariance_analysis", "make_truth", "simulate"]
 
 PAPER_MOUNT = tuple(np.radians([30.0, 20.0, 10.0]))
 """Seed 000, section 1.4: mounting angles (psi, theta, gamma) of the product [rad]."""
@@ -84,7 +94,9 @@ class AlignmentConfig:
     bank : float [rad]
         Peak bank angle of the S-turn, roll amplitude of the wing rock.
     period : float [s]
-        Period of the S-turn (one left and one right turn) or of the wing rock.
+        Period of the S-turn (one left and one right turn), of the wing rock or of the surge.
+    surge : float [m/s]
+        Speed amplitude of the surge manoeuvre (``|surge| < speed``; unused otherwise).
     duration : float [s]
         Length of the alignment; results are the errors at its end.
     dt : float [s]
@@ -116,6 +128,7 @@ class AlignmentConfig:
     speed: float = 200.0
     bank: float = float(np.radians(30.0))
     period: float = 60.0
+    surge: float = 20.0
     duration: float = 120.0
     dt: float = 0.02
     kf_interval: int = 10
@@ -134,6 +147,9 @@ class AlignmentConfig:
         if not (self.period > 0 and self.speed > 0 and abs(self.bank) < np.pi / 2):
             raise ValueError(f"need period > 0 (got {self.period!r} s), speed > 0 (got "
                              f"{self.speed!r} m/s) and |bank| < 90° (got {self.bank!r} rad)")
+        if self.manoeuvre == "surge" and not abs(self.surge) < self.speed:
+            raise ValueError(f"need |surge| < speed (got {self.surge!r} m/s, speed "
+                             f"{self.speed!r} m/s)")
         if self.kf_interval < 1 or self.dt <= 0 or self.duration < self.dt * self.kf_interval:
             raise ValueError(f"duration {self.duration!r} s: need dt > 0, kf_interval >= 1 "
                              "and at least one Kalman update")
@@ -147,104 +163,6 @@ class AlignmentConfig:
         """Mechanisation steps, a whole number of Kalman intervals."""
         n_updates = round(self.duration / (self.dt * self.kf_interval))
         return n_updates * self.kf_interval
-
-
-def _skew(v: FloatArray) -> FloatArray:
-    """Cross-product matrix ``[v x]``, shape (..., 3, 3)."""
-    x, y, z = np.moveaxis(np.asarray(v, float), -1, 0)
-    o = np.zeros_like(x)
-    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1),
-                     np.stack([-y, x, o], -1)], -2)
-
-
-def _exp(rotvec: FloatArray) -> FloatArray:
-    """Rotation matrix ``exp([v x])`` of rotation vectors, shape (..., 3, 3)."""
-    v = np.asarray(rotvec, float)
-    return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape(*v.shape[:-1], 3, 3)
-
-
-def _log(C: FloatArray) -> FloatArray:
-    """Rotation vector ``v`` with ``exp([v x]) = C``, shape (..., 3)."""
-    C = np.asarray(C, float)
-    return Rotation.from_matrix(C.reshape(-1, 3, 3)).as_rotvec().reshape(*C.shape[:-2], 3)
-
-
-def aircraft_motion(cfg: AlignmentConfig, t: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Aircraft attitude and velocity along the manoeuvre.
-
-    Heading psi is measured about up, positive to the left, so the nose points along
-    ``[-sin psi, cos psi, 0]`` (east, north, up), the seed 000 Z-X-Y convention with b_f
-    right-forward-up. In the S-turn the turn rate is ``w(t) = w0 sin(2 pi t / T)`` with
-    ``w0 = g tan(bank) / V``, and the bank is coordinated, ``gamma = -atan(V w / g)``, so the
-    specific force stays along the body z axis.
-
-    Parameters
-    ----------
-    cfg : AlignmentConfig
-    t : ndarray, shape (n,) [s]
-
-    Returns
-    -------
-    C_bn : ndarray, shape (n, 3, 3)
-        ``C_{b_f}^g``, aircraft body to navigation frame.
-    v_n : ndarray, shape (n, 3) [m/s]
-    """
-    t = np.asarray(t, float)
-    zero = np.zeros_like(t)
-    phase = 2.0 * np.pi * t / cfg.period
-    if cfg.manoeuvre == "s_turn":
-        w0 = G0 * np.tan(cfg.bank) / cfg.speed
-        rate = w0 * np.sin(phase)
-        psi = w0 * cfg.period / (2.0 * np.pi) * (1.0 - np.cos(phase))
-        gamma = -np.arctan(cfg.speed * rate / G0)
-    elif cfg.manoeuvre == "wing_rock":
-        psi, gamma = zero, cfg.bank * np.sin(phase)
-    else:
-        psi, gamma = zero, zero
-    C_bn = np.swapaxes(mounting_matrix(psi, zero, gamma), -1, -2)
-    v_n = cfg.speed * np.stack([-np.sin(psi), np.cos(psi), zero], axis=-1)
-    return C_bn, v_n
-
-
-@dataclass(frozen=True)
-class Truth:
-    """Sampled truth of the slave IMU along the manoeuvre (k = 0 .. n_steps).
-
-    Attributes
-    ----------
-    t : (n+1,) [s]
-    C_bn : (n+1, 3, 3)
-        Slave body (product frame a) to navigation frame.
-    v_n : (n+1, 3) [m/s]
-    dtheta : (n, 3) [rad]
-        Error-free gyro angle increments in body axes, ``exp([dtheta x]) = C_k^T C_{k+1}``.
-    f_b : (n, 3) [m/s²]
-        Error-free specific force in body axes over each step, defined so that the midpoint
-        mechanisation of :func:`simulate` reproduces ``v_n`` exactly.
-    C_mid, f_n : (n, 3, 3), (n, 3)
-        Mid-step attitude and navigation-frame specific force (for the filter's F matrix).
-    """
-
-    t: FloatArray
-    C_bn: FloatArray
-    v_n: FloatArray
-    dtheta: FloatArray
-    f_b: FloatArray
-    C_mid: FloatArray
-    f_n: FloatArray
-
-
-def make_truth(cfg: AlignmentConfig) -> Truth:
-    """Truth trajectory and error-free IMU outputs of the slave for ``cfg``."""
-    t = np.arange(cfg.n_steps + 1, dtype=np.float64) * cfg.dt
-    C_af, v_n = aircraft_motion(cfg, t)
-    C_a_bf = np.swapaxes(mounting_matrix(*cfg.mount), -1, -2)  # C_a^{b_f}, seed 000, eq. (5)
-    C_bn = C_af @ C_a_bf
-    dtheta = _log(np.swapaxes(C_bn[:-1], -1, -2) @ C_bn[1:])
-    C_mid = C_bn[:-1] @ _exp(dtheta / 2.0)
-    f_n = np.diff(v_n, axis=0) / cfg.dt - GRAVITY_N
-    f_b = np.einsum("kji,kj->ki", C_mid, f_n)
-    return Truth(t, C_bn, v_n, dtheta, f_b, C_mid, f_n)
 
 
 def _system_matrices(cfg: AlignmentConfig, C: FloatArray, f_n: FloatArray) -> FloatArray:
@@ -359,11 +277,25 @@ class MonteCarloResult:
         Actual misalignment (phi_E, phi_N, phi_U) of each run after each update.
     x_true : (runs, n_states)
         True error state at the end (phi, dv, remaining gyro bias, remaining accel bias, mu).
+    master_phi : (runs, 3) [rad]
+        The master's own attitude error (zero unless drawn).
     """
 
     cov: CovarianceHistory
     phi: FloatArray
     x_true: FloatArray
+    master_phi: FloatArray
+
+    def final_error(self, reference: str = "master") -> FloatArray:
+        """Each run's final (phi_E, phi_N, phi_U), shape (runs, 3) [rad].
+
+        ``reference = "master"``: relative to the master INS (what seed 000, Table 2 gives:
+        "IMU传递对准后对主惯导的相对精度"), ``phi - phi_master``; ``"true"``: against the true
+        navigation frame.
+        """
+        if reference not in ("master", "true"):
+            raise ValueError(f"reference {reference!r} not in ('master', 'true')")
+        return self.phi[-1] - (self.master_phi if reference == "master" else 0.0)
 
     def nees(self) -> FloatArray:
         """Normalised estimation error squared of each run's final state, shape (runs,)."""
@@ -402,29 +334,70 @@ def _misalignment(C_hat: FloatArray, C_true: FloatArray) -> FloatArray:
     return -_log(C_hat @ np.swapaxes(C_true, -1, -2))
 
 
-def simulate(cfg: AlignmentConfig, rng: np.random.Generator, runs: int) -> MonteCarloResult:
+def simulate(cfg: AlignmentConfig, rng: np.random.Generator, runs: int,
+             effects: TruthEffects | None = None) -> MonteCarloResult:
     """Monte Carlo of the closed-loop transfer alignment against the simulated truth.
 
-    Each run draws its initial misalignment, velocity error, gyro drift, accelerometer bias
-    (and mounting error) from the filter's P0, and its white noises from the configured
-    densities; the slave mechanises its corrupted IMU outputs, the filter estimates the error
+    Each run draws its initial misalignment, velocity error (and mounting error) from the
+    filter's P0, its gyro drift and accelerometer bias and its white noises from the true sensor
+    figures (``effects``, by default as the filter is tuned), and every further effect of
+    ``effects``; the slave mechanises its corrupted IMU outputs, the filter estimates the error
     state from the measurement residuals and the slave is corrected (and the error state reset)
     after each update.
 
     Parameters
     ----------
     cfg : AlignmentConfig
+        The filter's model and tuning (and the flight).
     rng : numpy.random.Generator
         The only source of randomness.
     runs : int
+    effects : TruthEffects, optional
+        The truth beyond the filter's model (default: none, a matched filter).
 
     Returns
     -------
     MonteCarloResult
     """
+    effects = TruthEffects() if effects is None else effects
     truth = make_truth(cfg)
     cov = covariance_analysis(cfg, truth)
-    x0 = rng.standard_normal((runs, cfg.n_states)) * np.sqrt(np.diag(initial_covariance(cfg)))
+    true = effects.sensor(cfg)
+    sd = np.sqrt(np.diag(initial_covariance(cfg)))
+    sd[6:9], sd[9:12] = true["gyro_drift"], true["accel_bias"]
+    x0 = rng.standard_normal((runs, cfg.n_states)) * sd
+    draws = draw_effects(effects, cfg, truth, rng, runs)
+    return _closed_loop(cfg, truth, cov, x0, draws, rng, true)
+
+
+def response(cfg: AlignmentConfig, draws: EffectDraws, truth: Truth | None = None
+             ) -> MonteCarloResult:
+    """The alignment's error caused by ``draws`` alone (no initial error, bias or noise).
+
+    To first order the closed-loop error is linear in its sources, so the error of a
+    configuration is the filter's own (matched) error plus the responses to its effects.
+    """
+    truth = make_truth(cfg) if truth is None else truth
+    x0 = np.zeros((draws.time_tag.shape[0], cfg.n_states))
+    return _closed_loop(cfg, truth, covariance_analysis(cfg, truth), x0, draws, None, {})
+
+
+def _reference(truth: Truth, k: int, tag: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Slave's true velocity and attitude at ``t_k - tag`` (linear / geodesic interpolation)."""
+    if not np.any(tag):
+        return truth.v_n[k], truth.C_bn[k]
+    pos = np.clip(k - tag / (truth.t[1] - truth.t[0]), 0.0, truth.t.size - 1.000001)
+    i0 = pos.astype(int)
+    frac = (pos - i0)[:, None]
+    v = truth.v_n[i0] + frac * (truth.v_n[i0 + 1] - truth.v_n[i0])
+    return v, truth.C_bn[i0] @ _exp(frac * truth.dtheta[i0])
+
+
+def _closed_loop(cfg: AlignmentConfig, truth: Truth, cov: CovarianceHistory, x0: FloatArray,
+                 draws: EffectDraws, rng: np.random.Generator | None, true: dict[str, float]
+                 ) -> MonteCarloResult:
+    """The closed loop of :func:`simulate`; ``rng = None``: no white noise (:func:`response`)."""
+    runs = x0.shape[0]
     phi0, dv0, b_g, b_a = x0[:, 0:3], x0[:, 3:6], x0[:, 6:9], x0[:, 9:12]
     C_hat = _exp(-phi0) @ truth.C_bn[0]
     v_hat = truth.v_n[0] + dv0
@@ -436,20 +409,32 @@ def simulate(cfg: AlignmentConfig, rng: np.random.Generator, runs: int) -> Monte
         nominal_from_true = _exp(-mu)
         M_hat = np.broadcast_to(np.eye(3), (runs, 3, 3)).copy()
     sqdt = np.sqrt(cfg.dt)
+    gyro_gain, accel_gain = 1.0 + draws.gyro_scale, 1.0 + draws.accel_scale
     phis, update = [], 0
     for k in range(cfg.n_steps):
-        dth = (truth.dtheta[k] + (b_g - b_g_hat) * cfg.dt
-               + cfg.gyro_arw * sqdt * rng.standard_normal((runs, 3)))
-        f_b = (truth.f_b[k] + b_a - b_a_hat
-               + cfg.accel_vrw / sqdt * rng.standard_normal((runs, 3)))
+        dth = truth.dtheta[k] * gyro_gain + (b_g - b_g_hat) * cfg.dt
+        f_b = truth.f_b[k] * accel_gain + b_a - b_a_hat
+        if rng is not None:
+            dth = dth + true["gyro_arw"] * sqdt * rng.standard_normal((runs, 3))
+            f_b = f_b + true["accel_vrw"] / sqdt * rng.standard_normal((runs, 3))
         C_hat, v_hat = mechanisation_step(C_hat, v_hat, dth, f_b, cfg.dt)
         if (k + 1) % cfg.kf_interval:
             continue
-        z = v_hat - truth.v_n[k + 1] - cfg.velocity_noise * rng.standard_normal((runs, 3))
+        C_now = truth.C_bn[k + 1]
+        v_ref, C_ref = _reference(truth, k + 1, draws.time_tag[:, update])
+        v_master = (v_ref + draws.master_dv[:, update]
+                    + lever_arm_velocity(C_now, truth.dtheta[k] / cfg.dt, draws.lever_arm_error)
+                    - lever_arm_velocity(C_now, draws.flexure_rate[:, update], draws.lever_arm))
+        z = v_hat - v_master
+        if rng is not None:
+            z = z - true["velocity_noise"] * rng.standard_normal((runs, 3))
         if cfg.attitude_matching:
-            C_ref = truth.C_bn[k + 1] @ nominal_from_true @ M_hat
+            # the master's view of the slave: its own attitude error, no flexure, nominal mount
+            C_ref = (_exp(-draws.master_phi) @ C_ref @ _exp(-draws.flexure[:, update])
+                     @ nominal_from_true @ M_hat)
             z_att = -_log(C_hat @ np.swapaxes(C_ref, -1, -2))
-            z_att = z_att + cfg.attitude_noise * rng.standard_normal((runs, 3))
+            if rng is not None:
+                z_att = z_att + true["attitude_noise"] * rng.standard_normal((runs, 3))
             z = np.concatenate([z, z_att], axis=1)
         x_hat = z @ cov.K[update].T
         update += 1
@@ -459,12 +444,13 @@ def simulate(cfg: AlignmentConfig, rng: np.random.Generator, runs: int) -> Monte
         b_a_hat = b_a_hat + x_hat[:, 9:12]
         if cfg.attitude_matching:
             M_hat = M_hat @ _exp(x_hat[:, 12:15])
-        phis.append(_misalignment(C_hat, truth.C_bn[k + 1]))
+        phis.append(_misalignment(C_hat, C_now))
     parts = [phis[-1], v_hat - truth.v_n[-1], b_g - b_g_hat, b_a - b_a_hat]
     if cfg.attitude_matching:
         # remaining mounting error: true C_b^{b_nom} = exp([mu x]) against the estimate M_hat
         parts.append(_log(np.swapaxes(M_hat, -1, -2) @ _exp(mu)))
-    return MonteCarloResult(cov, np.array(phis), np.concatenate(parts, axis=1))
+    return MonteCarloResult(cov, np.array(phis), np.concatenate(parts, axis=1),
+                            draws.master_phi)
 
 
 def observability_matrix(cfg: AlignmentConfig, segments: list[tuple[FloatArray, FloatArray]]

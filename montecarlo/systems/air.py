@@ -20,7 +20,8 @@ AIR = ParamSystem(
            "accel_bias": "g", "install_bound": "arcmin", "master_heading_sigma": "arcmin",
            "master_level_sigma": "arcmin", "mount_psi": "deg", "mount_theta": "deg",
            "mount_gamma": "deg", "aircraft_heading": "deg", "aircraft_pitch": "deg",
-           "aircraft_roll": "deg"},
+           "aircraft_roll": "deg", "ta_duration": "s", "ta_time_offset": "s",
+           "ta_lever_arm_error": "m"},
     metrics_=(
         Metric("rotation_angle", "true rotation angle φ of D", "mrad", 1e3),
         Metric("eq18_angle", "eq. (18) as printed, = φ/2", "mrad", 1e3),
@@ -38,6 +39,8 @@ AIR = ParamSystem(
     limits={**dict.fromkeys(("heading_sigma", "level_sigma", "gyro_drift", "accel_bias",
                              "install_bound", "master_heading_sigma", "master_level_sigma"),
                             (0.0, 1e4)),
+            "ta_duration": (0.0, 3600.0), "ta_time_offset": (0.0, 1.0),
+            "ta_lever_arm_error": (0.0, 100.0),
             "master_error_shared": (0.0, 1.0),
             **dict.fromkeys(("mount_psi", "mount_theta", "mount_gamma", "aircraft_heading",
                              "aircraft_pitch", "aircraft_roll"), (-360.0, 360.0))},
