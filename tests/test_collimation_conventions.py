@@ -237,8 +237,10 @@ SAME = {"sense": "same"}
 def test_outward_normal_with_reference_rows_passes_for_an_opposite_sense(tmp_path):
     """The theodolite reading the outward normal (azimuth + 180°, elevation negated) is not a
     convention the package knows. With reference rows it is exactly the data of an ``opposite``
-    azimuth sense with both offsets negated (the antipodal directions turn the frame of the
-    reference mirrors by 180° about the INS axis), so the fit is exact (chi-square ~0), decides
+    azimuth sense with both offsets negated: relative to the frame of the reference mirrors the
+    antipodal directions keep their azimuths and negate their elevations; with the azimuths
+    negated too (the opposite sense) that is a half turn about the central line of sight, which
+    (gamma, lambda) -> (-gamma, -lambda) reproduces. So the fit is exact (chi-square ~0), decides
     ``opposite`` and returns -gamma, -lambda: a wrong sign that no test of the data can reveal.
     Only the user's knowledge of the instrument settles it."""
     fit, choice, truth, _ = fit_auto(tmp_path, include_reference_rows=True, include_roll=True,
