@@ -385,6 +385,28 @@ def test_roll_mirror_errors_bias_relative_files_unseen(tmp_path):
         assert fit.chi2 / fit.dof < 2.0
 
 
+@pytest.mark.slow
+def test_unequal_ins_errors_and_one_angle_sigma(tmp_path):
+    """The simulator's own reading errors (INS heading 8″, pitch and roll 3″, theodolite 2″)
+    cannot be given to ``diagnose collimation``, which takes one sigma for every heading and
+    pitch residual. On three of its files with reference rows and the roll recorded (no effect
+    hidden that the package does not model): at the pitch's sigma, hypot(2, 3)″, the base model
+    is rejected in all three and mirrors are flagged or ``ins_roll`` named in two; at the
+    heading's, hypot(2, 8)″, nothing is detected (chi-square 7-16 for 18 degrees of freedom, a
+    test that has lost power). Neither is right; the user has no sigma that is."""
+    counts = {}
+    for sigma in (math.hypot(2.0, 3.0), math.hypot(2.0, 8.0)):
+        detected = flagged = 0
+        for seed in (1, 2, 3):
+            data, _ = simulate(tmp_path, include_reference_rows=True, include_roll=True,
+                               seed=seed)
+            d, _ = diagnosed(data, sigma * AS)
+            detected += d.detected
+            flagged += bool(d.named or d.outliers)
+        counts[round(sigma, 2)] = (detected, flagged)
+    assert counts == {3.61: (3, 2), 8.25: (0, 0)}
+
+
 # --------------------------------------------------------------------------- acceptance
 
 
