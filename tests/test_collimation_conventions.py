@@ -494,8 +494,9 @@ def test_ins_roll_named_at_2_mdb_in_90_percent(side, sense, tmp_path):
     (*c, rows) for c in COMBOS for rows in (False, True) if c[0] == "second" or not rows])
 def test_null_sets_name_nothing(sim, side, sense, rows, tmp_path):
     """300 null sets (level mount, 2″ on every reading; the second simulator's reference-row
-    files with its 15″ mirror errors): the global test rejects within the two-sided binomial
-    band around 1 %, and anything is named in no more sets than its upper bound."""
+    files with its 15″ mirror errors): the global test rejects within the two-sided 99 %
+    binomial band around 1 % (0-8 of 300: at this size the lower edge is 0), and anything is
+    named in no more sets than its upper edge."""
     n = 300
     c = diagnosis_counts(sim, side, sense, n, 64, tmp_path, reference_rows=rows)
     (lo, hi), most = null_bounds(n)

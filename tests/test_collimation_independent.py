@@ -227,7 +227,7 @@ def band(n: int, level: float = 0.99) -> tuple[float, float]:
     if c in KNOWN_FAILURES else c for c in COVERAGE_CASES])
 def test_offsets_within_2_sigma_on_second_simulator_data(tmp_path, case):
     """400 calibrations per case: each offset within 2 sigma in a count inside the two-sided
-    99 % binomial band around 95.45 % (about 371-392 of 400), so that an inflated sigma fails
+    99 % binomial band around 95.45 % (370-392 of 400), so that an inflated sigma fails
     as an optimistic one does."""
     n = 400
     inside, chi2 = coverage_counts(case, n, tmp_path)
