@@ -24,9 +24,11 @@ What the data cannot tell, and why (tested in ``tests/test_collimation_conventio
   with the mirror on the left; the side chosen is therefore "the side, if the azimuths turn
   clockwise".
 * **the INS's rotation order** (heading, pitch, roll: Z-X-Y about the INS's up, right and
-  forward axes, the order of Chinese INS practice): another order changes the readings only
-  through the roll, ``R_z R_x R_y(0) = R_z R_y(0) R_x``. With the roll not recorded (the paper's
-  table prints none) the roll is unknown, so the data cannot tell the orders apart.
+  forward axes, the order of Chinese INS practice): another order changes absolute readings
+  only through the roll, ``R_z R_x R_y(0) = R_z R_y(0) R_x``, so on a level mount absolute
+  readings cannot tell the orders apart. It is not fitted: relative readings are the INS's
+  attitude relative to its reference, whose roll is of the order of lambda even on a level mount,
+  and a recorded roll enters directly, so data of another order show as a misfit.
 
 References
 ----------
