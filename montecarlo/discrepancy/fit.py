@@ -18,6 +18,11 @@ from montecarlo.lsq import LeastSquaresFit
 FloatArray = NDArray[np.float64]
 
 
+SEPARABLE_CONDITION = float(np.sqrt(np.finfo(float).eps))
+"""Smallest ratio of the column-normalised design's least to largest singular value that a fit
+accepts: the normal matrix then keeps a condition number within double precision (1/eps)."""
+
+
 class FitError(ValueError):
     """The model cannot be fitted to these data (too few observations, singular design)."""
 
@@ -82,7 +87,9 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
     A = jacobian(problem, dict(zip(names, sol.x, strict=True)), names)
     norms = np.linalg.norm(A, axis=0)
     s = np.linalg.svd(A / np.where(norms > 0, norms, 1.0), compute_uv=False)
-    if norms.min() == 0.0 or s[-1] < 1e-10 * s[0]:
+    # the normal matrix A'A has the square of this condition: beyond 1/sqrt(eps) its inverse
+    # is round-off, whether or not LAPACK happens to find it singular
+    if norms.min() == 0.0 or s[-1] < SEPARABLE_CONDITION * s[0]:
         raise FitError(f"parameters of {', '.join(model)} are not separable with these data")
     try:
         cov = np.linalg.inv(A.T @ A)
