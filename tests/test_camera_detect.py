@@ -311,3 +311,29 @@ def test_the_public_photographs_first_three():
 def test_the_public_photographs_all_found():
     found, missing, _ = dt.detect(sorted(PUBLIC.glob("*.jpg")), dt.Board(9, 6, 25.0))
     assert len(found) == 12 and not missing and all(d.by_colour for d in found)
+
+
+@pytest.mark.slow
+def test_the_readme_photograph_chain(tmp_path):
+    """README, "From calibration photographs to a range size": the commands as printed; the
+    board found in all twelve photographs, the pixel error written and the range sized."""
+    import re
+    import shlex
+    import subprocess
+
+    text = (ROOT / "README.md").read_text()
+    block = re.search(r"```sh\n(\.venv/bin/montecarlo camera detect.*?)```", text, re.S)
+    commands = re.sub(r"\\\n\s*", " ", block.group(1)).strip().splitlines()
+    assert [shlex.split(c)[1] for c in commands] == ["camera", "diagnose", "size"]
+    (tmp_path / "tests").symlink_to(ROOT / "tests")
+    outputs = []
+    for command in commands:
+        args = [str(p) for a in shlex.split(command)[1:]
+                for p in (sorted(tmp_path.glob(a)) if "*" in a or "[" in a else [a])]
+        done = subprocess.run([sys.executable, "-m", "montecarlo", *args], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=3600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        outputs.append(done.stdout)
+    assert "found in 12 of 12 images (640x480 px), 648 corners" in outputs[0]
+    assert "pixel_px" in (tmp_path / "camera_errors.toml").read_text()
+    assert (tmp_path / "results" / "camera" / "image_residuals_1.png").is_file()

@@ -116,8 +116,8 @@ def plot_image_residuals(d: Diagnosis, data: CameraData, images: Mapping[str, st
                          views: Sequence[str], path: Path, page: str = "") -> Path:
     """``views``' residual vectors (measured − adapted model) drawn from their corners on their
     own images, at one scale for every view of the data (a 1, 2, 5 step putting the 95th
-    percentile of the unflagged residuals at 4 % of the image; stated in the title), flagged
-    corners circled and named, each view's RMS in its title."""
+    percentile of the unflagged residuals at 8 % of the image; stated in the title, with a key
+    arrow), flagged corners circled and named, each view's RMS in its title."""
     from montecarlo.discrepancy.camera_effects import raw_residuals
 
     res = raw_residuals(data, d.after.params)
@@ -128,14 +128,19 @@ def plot_image_residuals(d: Diagnosis, data: CameraData, images: Mapping[str, st
     size = np.hypot(res[:, 0], res[:, 1])
     kept = size[[n not in flagged for n in names]]
     typical = float(np.percentile(kept, 95)) if kept.size else 0.0
-    scale = nice_scale(typical, 0.04 * max(width, height))
-    fig, axes = _grid(len(views), 3.6)
+    scale = nice_scale(typical, 0.08 * max(width, height))
+    key = nice_scale(1.0, typical) if typical > 0 else 1.0  # a 1, 2, 5 step <= typical
+    fig, axes = _grid(len(views), 4.4)
     for ax, label in zip(axes, views, strict=False):
         mine = np.flatnonzero(data.view == data.views.index(label))
         _show(ax, read_grey(images[label]), alpha=0.55)
         xy, r = data.pixels[mine], res[mine]
-        ax.quiver(xy[:, 0], xy[:, 1], r[:, 0] * scale, r[:, 1] * scale, color="C0",
-                  angles="xy", scale_units="xy", scale=1.0, width=0.004)
+        arrows = ax.quiver(xy[:, 0], xy[:, 1], r[:, 0] * scale, r[:, 1] * scale,
+                           color="#ff6a00", angles="xy", scale_units="xy", scale=1.0,
+                           width=0.006, headwidth=3.5)
+        ax.quiverkey(arrows, 0.82, 0.04, key * scale, f"{key:g} px", labelpos="W",
+                     coordinates="axes", color="#ff6a00", labelcolor="#ff6a00",
+                     fontproperties={"size": 7})
         for i in mine:
             if names[i] in flagged:
                 ax.plot(*data.pixels[i], "o", ms=11, mfc="none", color="C3", mew=1.3)
