@@ -84,8 +84,9 @@ def test_each_corner_is_an_observation_named_view_slash_id(exact):
     data, _ = exact
     problem = ce.camera_problem(data, SIGMA)
     assert len(problem.observations) == data.n == 5 * GRID * GRID
-    assert problem.observations[0] == ("1/1", 2, (0, 1))
-    assert problem.observations[GRID * GRID + 1] == ("2/2", GRID * GRID + 3,
+    # the data row, 1-based, as every system's (the views file's line is one more)
+    assert problem.observations[0] == ("1/1", 1, (0, 1))
+    assert problem.observations[GRID * GRID + 1] == ("2/2", GRID * GRID + 2,
                                                      (2 * GRID * GRID + 2, 2 * GRID * GRID + 3))
 
 

@@ -74,6 +74,13 @@ def test_a_bad_corner_is_flagged():
     assert [t.name for t in d.outliers] == [f"outlier:{data.views[data.view[30]]}/"
                                            f"{data.point_id[30]}"]
     assert not d.named
+    # the report gives the flagged corner's own residual: near the injected shift, row 31
+    from montecarlo.discrepancy.view import to_json
+
+    (flagged,) = to_json(d, ce.report_view(data, SIGMA), "x")["outliers"]
+    assert flagged["observation"] == 31
+    assert flagged["size"]["u"] == pytest.approx(1.5, abs=0.5)
+    assert flagged["size"]["v"] == pytest.approx(-1.5, abs=0.5)
 
 
 def _cli(*args, cwd):

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from montecarlo import __version__
 from montecarlo.cli import (
     authoring,
+    camera,
     collimation,
     design,
     diagnose,
@@ -25,7 +26,7 @@ from montecarlo.cli import (
 from montecarlo.cli.common import EXIT_BAD_INPUT, Parser, verbosity
 from montecarlo.errors import InputError, RunInterrupted
 
-GROUPS = (study, authoring, seed000, collimation, stabilization, diagnose, design)
+GROUPS = (study, authoring, seed000, collimation, stabilization, diagnose, camera, design)
 """Command modules, in the order their commands are listed by ``--help``."""
 
 

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from montecarlo.cli.camera import add_diagnose_parser
 from montecarlo.cli.common import (
     Parser,
     add_force_option,
@@ -216,12 +217,6 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         print(line)
     steps.report(to_stderr=False)
     return 0
-
-
-def _cmd_diagnose_camera(args: argparse.Namespace) -> int:
-    from montecarlo.cli.camera import diagnose_camera
-
-    return diagnose_camera(args)
 
 
 def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) -> int:
@@ -502,18 +497,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     basic(p)
     p.set_defaults(func=_cmd_diagnose_stabilization)
 
-    p = dsub.add_parser("camera", help="camera calibration from a planar target in several "
-                        "views: pinhole against distortion, skew, aspect ratio, bad corners")
-    p.add_argument("model", help="CSV of the target's points: id, X, Y, unit (m, cm, mm, in)")
-    p.add_argument("views", help="CSV of the observed image points: view, id, u, v [px]")
-    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
-                   help="standard deviation of each image coordinate of a corner [px]")
-    p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json, "
-                   "residuals.csv and plots (residuals against radius and image position, gap)")
-    p.add_argument("--emit-errors", metavar="FILE.toml", help="write the [errors] pixel entry "
-                   "of a ground study (for montecarlo size|run --errors)")
-    basic(p)
-    p.set_defaults(func=_cmd_diagnose_camera)
+    add_diagnose_parser(dsub, basic)
 
     syn = sub.add_parser("synth", help="write a measured-like data set with chosen effects")
     ssub = syn.add_subparsers(dest="synth_command", required=True, parser_class=Parser)

@@ -111,7 +111,8 @@ def camera_problem(data: CameraData, pixel_sigma: float) -> Problem:
         pred = predict(cols).reshape(unique.shape[0], -1)
         return ((observed.ravel()[None, :] - pred) / pixel_sigma)[inverse.reshape(-1)]
 
-    observations = tuple((f"{data.views[data.view[i]]}/{data.point_id[i]}", int(data.rows[i]),
+    # each corner's data row, 1-based (as every system's; the views file's line is one more)
+    observations = tuple((f"{data.views[data.view[i]]}/{data.point_id[i]}", i + 1,
                           (2 * i, 2 * i + 1)) for i in range(data.n))
     return Problem("camera", base, CANDIDATES, residuals, start, {}, observations,
                    SEPARATING_DATA, REQUIRES)

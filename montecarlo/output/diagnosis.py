@@ -174,9 +174,11 @@ def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
 
 
 def write_html_report(outdir: str | Path, d: Diagnosis, view: SystemView,
-                      mc: Mapping[str, FloatArray] | None = None) -> Path:
+                      mc: Mapping[str, FloatArray] | None = None,
+                      extra: Mapping[str, Any] | None = None) -> Path:
     """``report.html`` beside ``report.md`` (:mod:`montecarlo.output.html_report`): the residual
-    and gap plots (``mc`` as for :func:`write_report`) inline as SVG, with captions."""
+    and gap plots (``mc`` as for :func:`write_report`) inline as SVG, with captions, and the
+    ``extra`` figures (file name in report.md -> ``HtmlFigure``) that report.md shows."""
     from montecarlo.output.html_report import HtmlFigure, drawn_svg, write_html
 
     pixel = ("Pixel relation: not modelled here (measured data, one residual per "
@@ -194,5 +196,6 @@ def write_html_report(outdir: str | Path, d: Diagnosis, view: SystemView,
             f"scale) with its 99 % band, and the residual RMS [{unit}]"
             + ("; the Monte Carlo distribution of χ²_red beside the measured value"
                if mc is not None else "") + f". {pixel}"),
+        **(extra or {}),
     }
     return write_html(outdir, figures, f"Diagnosis: {view.system}")

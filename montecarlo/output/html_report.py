@@ -276,12 +276,14 @@ def write_html(out_dir: str | Path, figures: Mapping[str, HtmlFigure], title: st
 
 _EXTERNAL = [re.compile(p, re.I) for p in (
     r"https?:", r"\bsrc\s*=", r"<link\b", r"<script\b", r"@import", r"url\(\s*['\"]?(?!#)",
-    r"\bhref\s*=\s*['\"](?!#)", r"<iframe\b", r"<object\b", r"<embed\b")]
+    r"\bhref\s*=\s*['\"](?!#|data:image/png;base64,)", r"<iframe\b", r"<object\b",
+    r"<embed\b")]
 
 
 def external_references(text: str) -> list[str]:
     """Whatever in an HTML text could reach outside it (empty for a self-contained report):
-    URLs, ``src``, stylesheet links, scripts, imports and ``href``s that are not ``#ids``."""
+    URLs, ``src``, stylesheet links, scripts, imports and ``href``s that are neither ``#ids``
+    nor a PNG held in the text itself (a photograph under a figure's vectors)."""
     return [m.group(0) for p in _EXTERNAL for m in p.finditer(text)]
 
 
