@@ -240,7 +240,9 @@ def _close(a, b):
     if isinstance(a, list):
         return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b, strict=True))
     if isinstance(a, float) and isinstance(b, float):
-        return a == pytest.approx(b, rel=1e-7, abs=1e-12, nan_ok=True)
+        # abs: a parameter the data cannot move (an estimate of a few 1e-9) is round-off, and
+        # its last digits change with the LAPACK build
+        return a == pytest.approx(b, rel=1e-7, abs=1e-8, nan_ok=True)
     return a == b
 
 
