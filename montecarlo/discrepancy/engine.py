@@ -206,8 +206,8 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
 
     Observations (``problem.observations``) are candidates of their own (data snooping): each
     step tests every observation's mean shift in the same family as the global test and the
-    effects (:func:`detection_family`), and the winner is the effect or observation with the smallest p-value, unless
-    an effect explains the observation's signal, alone or with one other
+    effects (:func:`detection_family`), and the winner is the effect or observation with the
+    smallest p-value, unless an effect explains the observation's signal, alone or with one other
     (:func:`effect_for_observation`): that effect comes first. A flagged observation gets its
     shift parameters (it no longer weighs on the fit). After each
     effect is added, every named effect is tested given the others (Wald, Holm at ``alpha``);

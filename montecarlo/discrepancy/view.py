@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from montecarlo.discrepancy.candidate_tests import POWER, CandidateTest, chi2_red_band
 from montecarlo.discrepancy.engine import Diagnosis
+from montecarlo.discrepancy.noise import format_noise, noise_scale
 from montecarlo.discrepancy.problem import OUTLIER, is_outlier
 from montecarlo.lsq import LeastSquaresFit
 
@@ -194,6 +195,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
                             for o, i, a, b in d.swaps],
         "largest_residuals": largest_residuals(d, view),
         "gap": {"before": _gap(view, d.before), "after": _gap(view, d.after)},
+        "noise_scale": noise_scale(d.after),
         "rms_unit": view.rms_unit,
         "base_physics": dict(view.base_physics),
         "alpha": d.alpha,
@@ -274,6 +276,10 @@ def format_text(report: Mapping[str, Any]) -> str:
     if report["detected"]:
         lines.append(f"adapted model: chi2_red = {a['chi2_red']:.3f} (dof {a['dof']}), "
                      f"p = {a['p_value']:.3g}, rms = {a['rms']:.4g} {unit}")
+    if "noise_scale" in report:
+        stated = {k.replace("_", " "): v for k, v in physics.items()
+                  if "sigma" in k and isinstance(v, int | float) and not isinstance(v, bool)}
+        lines.append(format_noise(report["noise_scale"], stated))
     if report["unexplained"]:
         lines.append("a misfit remains that no candidate explains; the largest standardised "
                      "residuals are at:")
