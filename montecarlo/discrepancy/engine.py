@@ -308,9 +308,13 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
         fit, swaps = _swap(full, fit, named, others, fixed | inactive, smaller, alpha)
         for out, into, *_ in swaps:
             named[named.index(out)] = into
+        if swaps:  # the lists of what the final model absorbs or could miss are its own
+            tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
+                                                      power, absorbed)
+            steps[-1] = Step(fit, tests, None, (), snoop, {}, global_p)
     final = steps[-1]
     absorbed_list = [t.name for t in final.tests if t.status == "absorbed"
-                     and t.name not in named]
+                     and t.name not in named and t.name not in dropped]
     confounded_groups = [_group_of(full, effects_view, fit, name, named, fixed, alpha, power,
                                    absorbed, confounded) for name in named]
     return Diagnosis(problem, alpha, before, fit, steps, named,

@@ -302,8 +302,9 @@ def format_text(report: Mapping[str, Any]) -> str:
     lines.append("what the final model could still miss: MDB of each candidate (its own test "
                  "at size a) and the largest shift it would cause, undetected at its MDB, in "
                  "the fitted parameters")
+    dropped = {e["name"] for e in report["dropped_effects"]}
     for c in report["candidates_after"]:
-        if c["status"] not in ("testable", "undetectable"):
+        if c["status"] not in ("testable", "undetectable") or c["name"] in dropped:
             continue
         mdb = ", ".join(f"{k} {v:.3g}{_unit(c['units'][k])}" for k, v in c["mdb"].items())
         if c.get("mdb_test"):
