@@ -72,7 +72,13 @@ def diagnose_camera(args: argparse.Namespace) -> int:
     data = read_camera_csv(args.model, args.views)
     source = f"{args.model}, {args.views}"
     sigma = args.pixel_sigma_px
+    estimated: dict[str, float] | None = None
     try:
+        if sigma == "auto":
+            with steps("estimating the pixel sigma", fit_why(2 * data.n,
+                                                             13 + 6 * len(data.views))):
+                estimated = cam.estimate_pixel_sigma(data)
+            sigma = estimated["sigma"]
         with steps("the diagnosis", fit_why(2 * data.n, 4 + 6 * len(data.views))):
             d = diagnose(cam.camera_problem(data, sigma), args.alpha)
     except (FitError, CalibrationError) as exc:
@@ -82,9 +88,15 @@ def diagnose_camera(args: argparse.Namespace) -> int:
     significance = practical_significance(d, view, cam.INTRINSIC_REPORTED)
     error = cam.pixel_error(d, data, sigma)
     report.update({"rms_convention": RMS_CONVENTION, "camera": camera_summary(d),
-                   "practical_significance": significance, "pixel_error": error})
+                   "practical_significance": significance, "pixel_error": error,
+                   "pixel_sigma_estimated": estimated})
     camera = report["camera"]
-    lines = [format_text(report), "", RMS_CONVENTION,
+    head = [] if estimated is None else [
+        f"pixel sigma estimated from the data (every candidate fitted, {estimated['dof']} "
+        f"dof): {estimated['sigma']:.4g} px, 95 % interval [{estimated['low']:.4g}, "
+        f"{estimated['high']:.4g}] px; the tests below take it as known (chi-square in "
+        "place of F)", ""]
+    lines = [*head, format_text(report), "", RMS_CONVENTION,
              "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
                  f"{k} = {v['value']:.6g} ± {v['stderr']:.2g}{_unit(v['unit'])}"
                  for k, v in camera.items() if v["stderr"] > 0),

@@ -40,6 +40,11 @@ if TYPE_CHECKING:
     from montecarlo.io.collimation_csv import MirrorData
 
 
+
+def positive_or_auto(text: str) -> float | str:
+    """A positive number, or ``auto`` (estimate it from the data)."""
+    return "auto" if text.strip().lower() == "auto" else positive(text)
+
 def _unit(unit: str) -> str:
     return "" if unit == "1" else f" {unit}"
 
@@ -506,8 +511,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                         "views: pinhole against distortion, skew, aspect ratio, bad corners")
     p.add_argument("model", help="CSV of the target's points: id, X, Y, unit (m, cm, mm, in)")
     p.add_argument("views", help="CSV of the observed image points: view, id, u, v [px]")
-    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
-                   help="standard deviation of each image coordinate of a corner [px]")
+    p.add_argument("--pixel-sigma-px", type=positive_or_auto, required=True, metavar="S",
+                   help="standard deviation of each image coordinate of a corner [px], or "
+                   "'auto': estimated from the data (the model with every candidate fitted)")
     p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json, "
                    "residuals.csv and plots (residuals against radius and image position, gap)")
     p.add_argument("--emit-errors", metavar="FILE.toml", help="write the [errors] pixel entry "
