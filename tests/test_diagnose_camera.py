@@ -19,6 +19,7 @@ from montecarlo.camera_calibration.calibrate import calibrate
 from montecarlo.camera_calibration.simulate import DEFAULT_CAMERA
 from montecarlo.discrepancy import camera_effects as ce
 from montecarlo.discrepancy.engine import diagnose
+from montecarlo.discrepancy.noise import noise_scale
 from montecarlo.discrepancy.significance import practical_significance
 from montecarlo.io.camera_csv import read_camera_csv
 from montecarlo.tools import camera_acceptance as ca
@@ -115,13 +116,30 @@ def test_cli_emits_errors_that_run_accepts(tmp_path):
 @pytest.mark.slow
 def test_zhangs_data_pinhole_rejected_radial_named():
     """Zhang's five views at a stated 0.25 px: the pinhole fails (rms 0.789 px per
-    coordinate), radial_k1 is named and the rest passes the global test."""
+    coordinate), radial_k1 is named first and the final model passes the global test."""
     data = read_camera_csv(CAMERA / "zhang_model.csv", CAMERA / "zhang_views.csv")
     d = diagnose(ce.camera_problem(data, 0.25))
     assert d.detected and d.named[0] == "radial_k1"
     # chi2_red = sum(r^2) / sigma^2 / dof: 2560 coordinates, 33 parameters
     assert d.before.chi2_red == pytest.approx((0.7891 / 0.25) ** 2 * 2560 / 2527, rel=1e-3)
     assert d.after.p_value > 0.01
+
+
+@pytest.mark.slow
+def test_zhangs_data_at_0p25_px_names_k1_and_k2_at_his_values():
+    """At a stated 0.25 px (the final model leaves 0.236 px per coordinate) the global test
+    of the model with k1 passes, but k2's own test (T = 55.6 on 1 dof) is rejected in the
+    detection family: k1 and k2 are named, at Zhang's -0.228601 +- 0.003, 0.190353 +- 0.03,
+    alpha 832.5 +- 1.5 px (tests/data/camera/README.md); the data give a noise scale whose
+    95 % interval excludes 1 (0.25 px is a little too large)."""
+    data = read_camera_csv(CAMERA / "zhang_model.csv", CAMERA / "zhang_views.csv")
+    d = diagnose(ce.camera_problem(data, 0.25))
+    assert d.named[:2] == ["radial_k1", "radial_k2"] and not d.outliers
+    p = d.after.params
+    assert abs(p["k1"] + 0.228601) < 0.003 and abs(p["k2"] - 0.190353) < 0.03
+    assert abs(p["f"] - 832.5) < 1.5
+    scale = noise_scale(d.after)
+    assert scale["verdict"] == "stated too large" and 0.93 < scale["factor"] < 0.97
 
 
 @pytest.mark.slow

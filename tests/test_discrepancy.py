@@ -103,12 +103,13 @@ def test_absorbed_undetectable_and_correlation():
 
 
 def test_mdb_has_noncentrality_lambda0():
-    """|Gbar mdb|^2 = lambda0 = max(global test, Bonferroni candidate test) at power 0.8."""
+    """|Gbar mdb|^2 = lambda0 of the candidate's own test at power 0.8, at its share of the
+    family (the candidates and the global test: alpha / (m + 1))."""
     problem = toy_problem(0.3 + 0.5 * X)
     fit = fit_model(problem, ())
     tests = {t.name: t for t in analyse_candidates(problem, fit)}
     family = sum(t.status in ("testable", "undetectable") for t in tests.values())
-    lam0 = max(noncentrality(0.01, X.size - 2), noncentrality(0.01 / family, 1))
+    lam0 = noncentrality(0.01 / (family + 1), 1)
     Q = np.linalg.qr(np.column_stack([np.ones_like(X), X]))[0]
     g = COLUMNS["quadratic"] - Q @ (Q.T @ COLUMNS["quadratic"])
     t = tests["quadratic"]
@@ -214,7 +215,7 @@ def test_design_mdb_along_a_direction():
     Q = np.linalg.qr(np.column_stack([np.ones_like(X), X]))[0]
     g = inj["q"] * X**2 + inj["c"] * X**3
     g -= Q @ (Q.T @ g)
-    lam0 = max(noncentrality(0.01, X.size - 2), noncentrality(0.01, 2))
+    lam0 = noncentrality(0.01 / 2, 2)  # its own 2-dof test, one candidate + the global test
     assert g @ g == pytest.approx(lam0, rel=1e-7)
 
 
@@ -246,8 +247,9 @@ def test_estimate_beyond_its_physical_bound_stays_at_the_bound():
 
 
 def test_mdb_uses_the_candidates_own_test_where_it_needs_more():
-    """Four observations (2 degrees of freedom) and several candidates: the candidate's own test
-    at alpha / m needs a larger noncentrality than the global test, and the MDB must use it."""
+    """Four observations (2 degrees of freedom) and several candidates: the MDB is that of the
+    candidate's own test at alpha / (m + 1) (the global test is one more member of the
+    family), even where the global test would need less."""
     x = np.array([-1.0, -0.4, 0.3, 1.0])
     columns = {"quadratic": x**2, "cubic": x**3, "step": (x > 0).astype(float)}
     base = Effect("line", ("a", "b"), ((-np.inf, np.inf),) * 2, (1e-3,) * 2)
@@ -263,15 +265,16 @@ def test_mdb_uses_the_candidates_own_test_where_it_needs_more():
     tests = [t for t in analyse_candidates(problem, fit) if t.status in ("testable",
                                                                           "undetectable")]
     m = len(tests)
-    glob, own = noncentrality(0.01, fit.dof), noncentrality(0.01 / m, 1)
+    glob, own = noncentrality(0.01, fit.dof), noncentrality(0.01 / (m + 1), 1)
     assert fit.dof == 2 and m == 3 and own > glob
     for t in tests:
         assert t.lambda0 == pytest.approx(own, rel=1e-12)
 
 
 def test_holm_adjusted_p_values_reach_the_report_json():
-    """The JSON's named effect carries the Holm-adjusted p-value of its candidate family, and
-    each candidate's p_adjusted is Holm's over the family of that step."""
+    """The JSON's named effect carries the Holm-adjusted p-value of its detection family, and
+    each candidate's p_adjusted is Holm's over the family of that step: the candidates and
+    the global test (equal weights without observations)."""
     from montecarlo.discrepancy.view import SystemView, to_json
 
     rng = np.random.default_rng(2)
@@ -283,8 +286,10 @@ def test_holm_adjusted_p_values_reach_the_report_json():
                       lambda params: np.zeros((X.size, 2)), [], "none", lambda fit: {})
     report = to_json(d, view, "toy")
     family = [c for c in report["candidates"] if np.isfinite(c["p_adjusted"])]
-    adjusted = multipletests([c["p_value"] for c in family], method="holm")[1]
-    np.testing.assert_allclose([c["p_adjusted"] for c in family], adjusted, rtol=1e-12)
+    p = [c["p_value"] for c in family] + [report["steps"][0]["p_value"]]
+    adjusted = multipletests(p, method="holm")[1]
+    np.testing.assert_allclose([c["p_adjusted"] for c in family], adjusted[:-1], rtol=1e-12)
+    assert report["steps"][0]["global_p_adjusted"] == pytest.approx(adjusted[-1], rel=1e-12)
     named = report["named_effects"][0]
     assert named["p_value"] == next(c["p_adjusted"] for c in family if c["name"] == "cubic")
     assert named["p_value"] != next(c["p_value"] for c in family if c["name"] == "cubic")
@@ -375,14 +380,13 @@ def test_a_partner_that_absorbs_the_winner_is_never_separated_from_it():
 
 
 def test_diagnose_passes_its_power_and_absorption_levels_on():
-    """power = 0.5 gives the MDB of Baarda's lambda0 at 50 %; absorbed = 0.99 absorbs every
+    """power = 0.5 gives the MDB of its own test's lambda0 at 50 %; absorbed = 0.99 absorbs every
     candidate (none keeps 99 % of its norm beside the line), so nothing can be named."""
     y = 0.3 + 0.5 * X + 5.0 * X**2 + np.random.default_rng(1).standard_normal(X.size)
     d = diagnose(toy_problem(y), power=0.5)
     t = next(t for t in d.steps[0].tests if t.name == "cubic")
     family = sum(s.status in ("testable", "undetectable") for s in d.steps[0].tests)
-    assert t.lambda0 == pytest.approx(max(noncentrality(0.01, X.size - 2, 0.5),
-                                          noncentrality(0.01 / family, 1, 0.5)), rel=1e-12)
+    assert t.lambda0 == pytest.approx(noncentrality(0.01 / (family + 1), 1, 0.5), rel=1e-12)
     assert [s.name for s in d.steps[0].tests] == list(COLUMNS) and d.steps[0].snoop == []
     everything = diagnose(toy_problem(y), absorbed=0.99)
     assert everything.named == [] and everything.unexplained

@@ -52,9 +52,9 @@ def test_scenarios_cover_every_testable_effect():
 
 def test_the_focal_scale_of_the_confounded_pair_is_below_its_mdb_given_the_range_bias():
     """The robust ground row "focal_scale + target_range_bias": the focal scale is injected
-    at 2 MDB of the base model; once the range bias is in, it is below its MDB there, and the
-    global test (which the diagnosis needs to go on) rejects with probability well below 0.8
-    (the power at which an MDB is defined)."""
+    at 2 MDB of the base model; once the range bias is in, it is below its MDB there, and its
+    own test (at its share of the detection family) rejects with probability below 0.8 (the
+    power at which an MDB is defined)."""
     alone = acc.power_given("focal_scale", ())
     assert alone["injected"] == pytest.approx(2.0 * alone["mdb"], rel=1e-6)
     assert alone["lambda"] == pytest.approx(4.0 * alone["lambda0"], rel=1e-4)

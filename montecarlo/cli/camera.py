@@ -135,7 +135,13 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         data, where = det.data, "--images"
         source = f"{len(det.found)} images ({det.found[0].path} ... {det.found[-1].path})"
     sigma = args.pixel_sigma_px
+    estimated: dict[str, float] | None = None
     try:
+        if sigma == "auto":
+            with steps("estimating the pixel sigma", fit_why(2 * data.n,
+                                                             13 + 6 * len(data.views))):
+                estimated = cam.estimate_pixel_sigma(data)
+            sigma = estimated["sigma"]
         with steps("the diagnosis", fit_why(2 * data.n, 4 + 6 * len(data.views))):
             d = diagnose(cam.camera_problem(data, sigma), args.alpha)
     except (FitError, CalibrationError) as exc:
@@ -145,9 +151,15 @@ def diagnose_camera(args: argparse.Namespace) -> int:
     significance = practical_significance(d, view, cam.INTRINSIC_REPORTED)
     error = cam.pixel_error(d, data, sigma)
     report.update({"rms_convention": RMS_CONVENTION, "camera": camera_summary(d),
-                   "practical_significance": significance, "pixel_error": error})
+                   "practical_significance": significance, "pixel_error": error,
+                   "pixel_sigma_estimated": estimated})
     camera = report["camera"]
-    lines = [format_text(report), "", RMS_CONVENTION,
+    head = [] if estimated is None else [
+        f"pixel sigma estimated from the data (every candidate fitted, {estimated['dof']} "
+        f"dof): {estimated['sigma']:.4g} px, 95 % interval [{estimated['low']:.4g}, "
+        f"{estimated['high']:.4g}] px; the tests below take it as known (chi-square in "
+        "place of F)", ""]
+    lines = [*head, format_text(report), "", RMS_CONVENTION,
              "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
                  f"{k} = {v['value']:.6g} ± {v['stderr']:.2g}{_unit(v['unit'])}"
                  for k, v in camera.items() if v["stderr"] > 0),
@@ -363,6 +375,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_camera_detect)
 
 
+def positive_or_auto(text: str) -> float | str:
+    """A positive number, or ``auto`` (estimate it from the data)."""
+    return "auto" if text.strip().lower() == "auto" else positive(text)
+
+
 def add_diagnose_parser(dsub: argparse._SubParsersAction,
                         basic: Callable[[argparse.ArgumentParser], None]) -> None:
     """``diagnose camera``: from the two CSV files, or from photographs (``--images``)."""
@@ -376,8 +393,9 @@ def add_diagnose_parser(dsub: argparse._SubParsersAction,
                    "instead of the CSV files: find the corners first (as camera detect), with "
                    "--board and --square-mm")
     detection_options(p, required=False)
-    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
-                   help="standard deviation of each image coordinate of a corner [px]")
+    p.add_argument("--pixel-sigma-px", type=positive_or_auto, required=True, metavar="S",
+                   help="standard deviation of each image coordinate of a corner [px], or "
+                   "'auto': estimated from the data (the model with every candidate fitted)")
     p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json, "
                    "residuals.csv and plots (residuals against radius and image position, gap; "
                    "with --images also the residuals drawn on each image, the corners found "

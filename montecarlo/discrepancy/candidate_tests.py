@@ -1,16 +1,17 @@
 """Identification statistics of the DIA engine (:mod:`montecarlo.discrepancy.engine`).
 
 Each candidate effect's columns projected orthogonal to the current model, the absorbed
-parameters, the likelihood-ratio statistic ``T ~ chi2(q)`` with Holm's step-down adjustment over
-the family, the minimal detectable bias from Baarda's noncentrality ``lambda0``, canonical
-correlations between candidates, and the Wald test of fitted parameters. References in the
-engine's docstring.
+parameters, the likelihood-ratio statistic ``T ~ chi2(q)``, the minimal detectable bias of the
+candidate's own test (Baarda's noncentrality ``lambda0`` at that test's size in the detection
+family, :func:`family_levels`), Holm's (weighted) step-down adjustment, canonical correlations
+between candidates, and the Wald test of fitted parameters. References in the engine's
+docstring.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -48,6 +49,37 @@ def holm(p_values: Sequence[float]) -> FloatArray:
     out = np.empty(m)
     out[order] = stepped
     return out
+
+
+def weighted_holm(p_values: Sequence[float], weights: Sequence[float]) -> FloatArray:
+    """Holm's weighted step-down adjusted p-values (Holm 1979, section 3).
+
+    Hypotheses are ordered by ``p_i / w_i``; the j-th is rejected at ``alpha`` when all before
+    it are and ``p_(j) <= alpha w_(j) / sum of the weights not yet rejected``. The adjusted
+    p-value is ``max_{i <= j} min(1, p_(i) W_i / w_(i))`` with ``W_i`` the weight left at
+    step i. The family-wise error rate is at most ``alpha`` under any dependence. Equal
+    weights give :func:`holm`.
+    """
+    p = np.asarray(p_values, float)
+    w = np.asarray(weights, float)
+    order = np.argsort(p / w, kind="stable")
+    left = np.cumsum(w[order][::-1])[::-1]
+    stepped = np.minimum(1.0, np.maximum.accumulate(p[order] * left / w[order]))
+    out = np.empty(p.size)
+    out[order] = stepped
+    return out
+
+
+def family_levels(alpha: float, n_effects: int, observations: bool) -> tuple[float, float]:
+    """Size of each member's own test at the first step of the detection family.
+
+    The family is the global test, each of ``n_effects`` candidate effects (weight 1 each) and,
+    when the data have observations that can be wrong on their own, the observations (weight
+    1 together, shared equally). Returns (level of the global test and of each effect, level
+    of the observations together); one observation's is the latter over their number.
+    """
+    share = alpha / (1 + n_effects + int(observations))
+    return share, share if observations else 0.0
 
 
 @lru_cache(maxsize=4096)
@@ -99,13 +131,17 @@ class CandidateTest:
     retained : parameter -> fraction of its column's norm left after projection on the model.
     absorbed_by : absorbed parameter -> model parameters that absorb it.
     statistic, dof, p_value, log_p : likelihood-ratio statistic ``T`` and its chi2(dof) tail.
-    p_adjusted : Holm-adjusted p-value over the family (NaN outside the family).
+    p_adjusted : Holm-adjusted p-value over the detection family (NaN outside it); the engine
+        sets it over the whole family (global test, effects, observations), this module
+        within the candidates analysed together.
     estimate, stderr : linearised size of the active parameters and its 1-sigma.
-    mdb : active parameter -> minimal detectable bias (alone, others zero).
+    mdb : active parameter -> minimal detectable bias (alone, others zero) of the candidate's
+        own chi2(dof) test at size ``level`` with power :data:`POWER`.
     influence : model parameter -> largest shift of its estimate caused by one of the
         candidate's parameters left out at its MDB (Baarda's external reliability: how much an
         effect the test cannot see may bias the fitted model).
-    lambda0 : noncentrality at which the chain detects and identifies it with ``power``.
+    lambda0 : noncentrality at which its own test rejects with ``power``.
+    level : size of its own test at the first step of Holm's procedure (the MDB's test).
     reason : text for statuses other than testable.
     """
 
@@ -125,6 +161,7 @@ class CandidateTest:
     influence: dict[str, float] = field(default_factory=dict)
     lambda0: float = math.nan
     reason: str = ""
+    level: float = math.nan
     basis: FloatArray | None = field(default=None, repr=False, compare=False)
     projected: FloatArray | None = field(default=None, repr=False, compare=False)
 
@@ -147,13 +184,15 @@ def _absorbed_by(column: FloatArray, A: FloatArray, names: Sequence[str]) -> lis
 
 
 def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
-                       power: float = POWER, absorbed: float = ABSORBED
-                       ) -> list[CandidateTest]:
+                       power: float = POWER, absorbed: float = ABSORBED,
+                       level: Callable[[int], float] | None = None) -> list[CandidateTest]:
     """Identification statistics of every candidate against the model of ``fit``.
 
     Linearised at the fitted values with each candidate's parameters at zero. See the module
-    docstring for the statistic, absorption, MDB and undetectability; the family for Holm's
-    procedure (and ``m`` in the MDB) is the candidates with at least one active parameter.
+    docstring for the statistic, absorption, MDB and undetectability. The members of the
+    family are the candidates with at least one active parameter; ``level(m)`` is the size of
+    each one's own test when there are ``m`` (default: candidate effects in the detection
+    family of :func:`family_levels`); Holm's adjustment here is within these candidates.
     """
     A = fit.jacobian
     Q = _orthonormal(A)
@@ -215,7 +254,8 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
             work.append((c, active, G, Gbar, retained, absorbed_by))
 
     m = len(work)
-    lam_global = noncentrality(alpha, fit.dof, power) if fit.dof > 0 else math.inf
+    size = level(m) if level is not None else family_levels(
+        alpha, m, bool(problem.observations))[0]
     log_ps = []
     for c, active, G, Gbar, retained, absorbed_by in work:
         Ga = Gbar[:, active]
@@ -225,7 +265,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         est = cov @ (Ga.T @ r)
         T = float(est @ N @ est)
         q = len(active)
-        lam0 = max(lam_global, noncentrality(alpha / m, q, power))
+        lam0 = noncentrality(size, q, power)
         mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
         shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
         influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))
@@ -241,7 +281,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
             c.name, status, names, retained, absorbed_by, T, q, float(np.exp(log_p)), log_p,
             math.nan, dict(zip(names, est.tolist(), strict=True)),
             dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
-            lam0, reason, _orthonormal(Ga), Ga)
+            lam0, reason, size, _orthonormal(Ga), Ga)
         log_ps.append(log_p)
     if work:
         adjusted = holm(np.exp(log_ps))

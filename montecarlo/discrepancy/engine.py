@@ -10,33 +10,41 @@ snooping, Teunissen's DIA):
 
 1. **Fit** the current model by nonlinear least squares (``scipy.optimize.least_squares``),
    candidate parameters within their physical bounds.
-2. **Detect**: global test ``chi2 = r'r ~ chi2(n - p)``; misfit if its p-value < ``alpha``.
-3. **Identify**: for every candidate, its whitened Jacobian columns ``G`` (derivative of the
+2. **Test**: for every candidate, its whitened Jacobian columns ``G`` (derivative of the
    prediction with respect to its parameters at zero) projected orthogonal to the model's
    columns ``A``: ``Gbar = (I - P_A) G``. Parameters whose projected column keeps less than
    ``absorbed`` (5 %) of its norm are *absorbed* (the model already explains them); a candidate
    with all parameters absorbed is never named. The likelihood-ratio statistic of the remaining
    columns is ``T = r' Gbar (Gbar'Gbar)^-1 Gbar' r ~ chi2(q)`` (central under the model,
-   noncentral with ``lambda = |Gbar b|^2`` under a bias ``b``). Holm's step-down procedure over
-   the candidates controls the family error at ``alpha``; the candidate with the smallest
-   p-value is the winner if Holm rejects it. Candidates whose statistics correlate with the
-   winner's above ``confounded`` (0.9, the largest canonical correlation of the projected
-   column spaces) form a *confounded group* with it unless the data separate them (the
-   partner, fitted instead, leaves a significant signal in the winner's columns). A candidate
-   inside the winner's column space with fewer parameters that explains its signal (alone or
-   with one other candidate) is adapted instead: the group's minimal parametrisation
-   (:func:`minimal_member`); the groups reported are those of the final model.
+   noncentral with ``lambda = |Gbar b|^2`` under a bias ``b``). Each observation that can be
+   wrong on its own is a candidate too (its mean shift: data snooping).
+3. **Detect and identify in one family**: the global test ``chi2 = r'r ~ chi2(n - p)``, each
+   candidate effect's test and the observations' tests form one family under Holm's weighted
+   step-down procedure at ``alpha`` (the global test and each effect weight 1, the
+   observations weight 1 together): the family-wise rate of naming anything under a right
+   model is at most ``alpha``, and a candidate whose own test is rejected is named whether or
+   not the global test is (the global test over ``n - p`` degrees of freedom loses its power
+   as ``n`` grows; a candidate's own test does not). The eligible candidate with the smallest
+   p-value is the winner. Candidates whose statistics correlate with the winner's above
+   ``confounded`` (0.9, the largest canonical correlation of the projected column spaces)
+   form a *confounded group* with it unless the data separate them (the partner, fitted
+   instead, leaves a significant signal in the winner's columns). A candidate inside the
+   winner's column space with fewer parameters that explains its signal (alone or with one
+   other candidate) is adapted instead: the group's minimal parametrisation
+   (:func:`minimal_member`); the groups reported are those of the final model. A rejected
+   global test with no candidate rejected is a misfit no candidate explains.
 4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2 (a winner
-   whose adapted model is singular is not adapted but dropped, with p = NaN).
+   whose adapted model is singular is not adapted but dropped, with p = NaN); stop when no
+   candidate is rejected.
 
-The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the whole chain
-detects and identifies it with probability ``power`` (0.80): the noncentrality ``lambda0`` is the
-larger of the one that gives the global test (``alpha``, ``n - p`` degrees of freedom) and the
-candidate's own test (``alpha / m``, ``q`` degrees of freedom, ``m`` candidates in the family)
-that power, and ``MDB = sqrt(lambda0 / |Gbar e_k|^2)``. A candidate that stays below
-``lambda0`` anywhere inside its physical bounds is *undetectable*: no physically possible size of
-it could be told from noise, so it is never named (a significant signal along its columns must
-come from something else).
+The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the
+candidate's own test rejects with probability ``power`` (0.80) at its size in the family's
+first Holm step (``alpha / (m + 2)`` for ``m`` candidate effects, the global test and the
+observations; an observation's share is that over the number of observations): Baarda's
+noncentrality ``lambda0`` of that chi2(q) test and ``MDB = sqrt(lambda0 / |Gbar e_k|^2)``. A
+candidate that stays below ``lambda0`` anywhere inside its physical bounds is
+*undetectable*: no physically possible size of it could be told from noise, so it is never
+named (a significant signal along its columns must come from something else).
 
 References
 ----------
@@ -63,8 +71,10 @@ from montecarlo.discrepancy.candidate_tests import (
     CandidateTest,
     analyse_candidates,
     canonical_correlation,
+    family_levels,
     holm,
     wald_test,
+    weighted_holm,
 )
 from montecarlo.discrepancy.confounding import (
     effect_for_observation,
@@ -84,9 +94,10 @@ FloatArray = NDArray[np.float64]
 class Step:
     """One identification step: the model tested, its fit, every candidate's statistics, the
     winner (None if nothing was significant: an effect, or an observation ``outlier:ID``), its
-    confounded partners, each observation's outlier test (``snoop``) and the named effects
+    confounded partners, each observation's outlier test (``snoop``), the named effects
     dropped after this step's adaptation because the others explain them (``dropped``:
-    name -> Holm-adjusted p-value of its Wald test given the others)."""
+    name -> Holm-adjusted p-value of its Wald test given the others) and the global test's
+    Holm-adjusted p-value in the detection family (``global_p``)."""
 
     fit: LeastSquaresFit
     tests: list[CandidateTest]
@@ -94,6 +105,7 @@ class Step:
     group: tuple[str, ...]
     snoop: list[CandidateTest] = field(default_factory=list)
     dropped: dict[str, float] = field(default_factory=dict)
+    global_p: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -156,12 +168,16 @@ class Diagnosis:
 
     @property
     def detected(self) -> bool:
-        return bool(self.before.p_value < self.alpha)
+        """The base model's detection family rejected something (its global test or a
+        candidate)."""
+        first = self.steps[0]
+        return bool(first.global_p < self.alpha or first.winner is not None)
 
     @property
     def unexplained(self) -> bool:
-        """A misfit remains that no candidate explains."""
-        return bool(self.after.p_value < self.alpha)
+        """A misfit remains that no candidate explains: the final model's global test is
+        rejected in its detection family."""
+        return bool(self.steps[-1].global_p < self.alpha)
 
     def effect_result(self, name: str) -> dict[str, object]:
         """Fitted parameters and 1-sigma of a named effect, and its identification p-value
@@ -183,15 +199,15 @@ class Diagnosis:
 
 def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
              absorbed: float = ABSORBED, confounded: float = CONFOUNDED) -> Diagnosis:
-    """Detect, identify and adapt until the global test passes or nothing is significant.
+    """Detect, identify and adapt until no candidate is rejected in the detection family.
 
     See the module docstring. The base model is always fitted and its candidates analysed (for
-    the absorbed list and the MDBs), even when the global test passes.
+    the absorbed list and the MDBs), whatever the tests say.
 
     Observations (``problem.observations``) are candidates of their own (data snooping): each
-    step tests every observation's mean shift, as a second family under Holm's procedure at
-    ``alpha``, and the winner is the effect or observation with the smallest p-value, unless
-    an effect explains the observation's signal, alone or with one other
+    step tests every observation's mean shift in the same family as the global test and the
+    effects (:func:`detection_family`), and the winner is the effect or observation with the
+    smallest p-value, unless an effect explains the observation's signal, alone or with one other
     (:func:`effect_for_observation`): that effect comes first. A flagged observation gets its
     shift parameters (it no longer weighs on the fit). After each
     effect is added, every named effect is tested given the others (Wald, Holm at ``alpha``);
@@ -210,15 +226,11 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     fixed: set[str] = set()
     retried = False
     while True:
-        tests = analyse_candidates(effects_view, fit, alpha, power, absorbed)
-        snoop = analyse_candidates(outlier_view, fit, alpha, power, absorbed) \
-            if outlier_view.candidates else []
-        if fit.p_value >= alpha and (retried or not outliers):
-            steps.append(Step(fit, tests, None, (), snoop))
-            break
-        if not retried and outliers and (fit.p_value >= alpha or not any(
-                t.status == "testable" and t.p_adjusted < alpha and t.name not in dropped
-                for t in (*tests, *snoop))):
+        tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
+                                                  power, absorbed)
+        eligible = [t for t in (*tests, *snoop) if t.status == "testable"
+                    and t.p_adjusted < alpha and t.name not in dropped]
+        if not eligible and outliers and not retried:
             # before stopping: would one effect explain what the flagged observations took?
             retried = True
             others = [t.name for t in tests if t.status == "testable" and t.name not in dropped]
@@ -229,22 +241,19 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
                 for t in outliers:
                     dropped[t.name] = math.nan
                 steps.append(Step(tested, tests, name, (name,), snoop,
-                                  {t.name: math.nan for t in outliers}))
+                                  {t.name: math.nan for t in outliers}, global_p))
                 outliers = []
                 named.append(name)
             continue
-        eligible = [t for t in (*tests, *snoop) if t.status == "testable"
-                    and t.p_adjusted < alpha and t.name not in dropped]
         if not eligible:
-            steps.append(Step(fit, tests, None, (), snoop))
+            steps.append(Step(fit, tests, None, (), snoop, {}, global_p))
             break
         win = min(eligible, key=lambda t: (t.log_p, t.dof))
         if is_outlier(win.name):
             # an effect that explains the observation's signal (alone or with one other
             # effect) comes first
-            level = alpha / max(1, sum(t.status == "testable" for t in snoop))
             win = effect_for_observation(win, [t for t in eligible if not is_outlier(t.name)],
-                                         fit.residual, level, alpha, absorbed) or win
+                                         fit.residual, win.level, alpha, absorbed) or win
         if not is_outlier(win.name):
             stand_in = minimal_member(
                 win, [t for t in eligible if not is_outlier(t.name)],
@@ -274,7 +283,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
         fixed |= set(effect.parameters) - set(win.active)
         if is_outlier(win.name):
             outliers.append(win)
-            steps.append(Step(tested, tests, win.name, (), snoop))
+            steps.append(Step(tested, tests, win.name, (), snoop, {}, global_p))
             continue
         named.append(win.name)
         fit, gone = _reconsider(full, fit, [*named, *(t.name for t in outliers)], fixed, alpha)
@@ -284,7 +293,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             else:
                 named.remove(name)
             dropped[name] = p
-        steps.append(Step(tested, tests, win.name, group, snoop, gone))
+        steps.append(Step(tested, tests, win.name, group, snoop, gone, global_p))
     swaps: list[tuple[str, str, float, float]] = []
     if len(named) >= 2:
         others = [t.name for t in steps[-1].tests
@@ -299,14 +308,53 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
         fit, swaps = _swap(full, fit, named, others, fixed | inactive, smaller, alpha)
         for out, into, *_ in swaps:
             named[named.index(out)] = into
+        if swaps:  # the lists of what the final model absorbs or could miss are its own
+            tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
+                                                      power, absorbed)
+            steps[-1] = Step(fit, tests, None, (), snoop, {}, global_p)
     final = steps[-1]
     absorbed_list = [t.name for t in final.tests if t.status == "absorbed"
-                     and t.name not in named]
+                     and t.name not in named and t.name not in dropped]
     confounded_groups = [_group_of(full, effects_view, fit, name, named, fixed, alpha, power,
                                    absorbed, confounded) for name in named]
     return Diagnosis(problem, alpha, before, fit, steps, named,
                      [g.members for g in confounded_groups], absorbed_list, outliers, dropped,
                      swaps, confounded_groups)
+
+
+def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresFit,
+                     alpha: float = ALPHA, power: float = POWER, absorbed: float = ABSORBED
+                     ) -> tuple[list[CandidateTest], list[CandidateTest], float]:
+    """The tests of one step as one family under Holm's weighted procedure.
+
+    ``effects`` carries the candidate effects, ``observations`` the observations' shift
+    effects (no candidates: no data snooping). Members: the global test of ``fit`` and each
+    effect (weight 1), the observations (weight 1 together, :func:`family_levels`). Returns
+    the effects' and observations' tests with ``p_adjusted`` over the whole family and their
+    MDBs at their own first-step sizes, and the global test's adjusted p-value.
+    """
+    tests = analyse_candidates(effects, fit, alpha, power, absorbed)
+    members = [t for t in tests if math.isfinite(t.statistic)]
+    has_obs = bool(observations.candidates)
+    _, obs_share = family_levels(alpha, len(members), has_obs)
+    snoop = analyse_candidates(observations, fit, alpha, power, absorbed,
+                               level=lambda k: obs_share / max(k, 1)) if has_obs else []
+    seen = [t for t in snoop if math.isfinite(t.statistic)]
+    names = [t.name for t in (*members, *seen)]
+    p = [t.p_value for t in (*members, *seen)]
+    w = [1.0] * len(members) + [1.0 / max(len(seen), 1)] * len(seen)
+    if fit.dof > 0:
+        names, p, w = [*names, "global"], [*p, fit.p_value], [*w, 1.0]
+    if has_obs and not seen:  # the observations' share stays unspent
+        names, p, w = [*names, "observations"], [*p, 1.0], [*w, 1.0]
+    adjusted = dict(zip(names, weighted_holm(p, w).tolist(), strict=True)) if p else {}
+    global_p = adjusted.get("global", math.nan)
+
+    def update(ts: list[CandidateTest]) -> list[CandidateTest]:
+        return [replace(t, p_adjusted=adjusted[t.name]) if t.name in adjusted else t
+                for t in ts]
+
+    return update(tests), update(snoop), global_p
 
 
 def _group_of(problem: Problem, view: Problem, fit: LeastSquaresFit, name: str,
@@ -363,7 +411,8 @@ def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
     test of the extra parameters would (AIC alone accepts two unneeded parameters, a lever arm
     for the range bias it contains, with probability P(chi2(2) > 4) = 13.5 %). Candidates of
     ``smaller`` (absorbed by the final model) replace only an effect with more parameters
-    (those not held at zero by ``fixed``). Returns the final fit and the swaps made."""
+    (those not held at zero by ``fixed``). A swap keeps the problem's hierarchy
+    (``Problem.requires``). Returns the final fit and the swaps made."""
     swaps: list[tuple[str, str, float, float]] = []
     named, others = list(named), [*others, *smaller]
 
@@ -371,6 +420,13 @@ def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
         return len(set(problem.effect(name).parameters) - fixed)
 
     def allowed(out: str, into: str) -> bool:
+        # the hierarchy stays (k3 only with k2): nothing left needs ``out``, ``into``'s need
+        # stays in the model
+        kept = [n for n in named if n != out]
+        need = problem.requires.get(into)
+        if (need is not None and need not in kept) or any(
+                problem.requires.get(n) == out for n in kept):
+            return False
         return into not in smaller or size(into) < size(out)
 
     def aic(f: LeastSquaresFit) -> float:

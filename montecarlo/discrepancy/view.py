@@ -14,8 +14,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from montecarlo.discrepancy.candidate_tests import CandidateTest, chi2_red_band
+from montecarlo.discrepancy.candidate_tests import POWER, CandidateTest, chi2_red_band
 from montecarlo.discrepancy.engine import Diagnosis
+from montecarlo.discrepancy.noise import format_noise, noise_scale
 from montecarlo.discrepancy.problem import OUTLIER, is_outlier
 from montecarlo.lsq import LeastSquaresFit
 
@@ -92,8 +93,17 @@ def _outliers(d: Diagnosis, view: SystemView) -> list[dict[str, Any]]:
                     "size_unit": view.rms_unit,
                     "size_sigma": float(np.linalg.norm(list(t.estimate.values()))),
                     "p_value": t.p_adjusted, "statistic": t.statistic, "dof": t.dof,
-                    "mdb_sigma": float(max(t.mdb.values()))})
+                    "mdb_sigma": float(max(t.mdb.values())), "mdb_test": _mdb_test(t)})
     return out
+
+
+def _mdb_test(t: CandidateTest) -> dict[str, Any] | None:
+    """The test an MDB belongs to: the candidate's own chi2(dof) test, its size (its share of
+    alpha at the first step of Holm's procedure over the detection family) and power."""
+    if not t.mdb:
+        return None
+    return {"test": "own", "statistic": f"chi2({t.dof})", "dof": t.dof, "size": t.level,
+            "power": POWER, "lambda0": t.lambda0}
 
 
 def largest_residuals(d: Diagnosis, view: SystemView, k: int = 5) -> list[dict[str, Any]]:
@@ -145,8 +155,9 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
 
     Fixed keys: ``system, detected, named_effects[{name, parameters, stderr, p_value}],
     confounded_groups, absorbed, gap{before, after}{chi2_red, rms, p_value}, rms_unit``;
-    ``p_value`` of a named effect is Holm-adjusted. Extra keys: the models before and after,
-    every candidate's statistics at the base model and each step.
+    ``p_value`` of a named effect is Holm-adjusted over the detection family (global test,
+    candidate effects, observations); each MDB says its test (``mdb_test``). Extra keys: the
+    models before and after, every candidate's statistics at the base model and each step.
     """
     named = []
     for name in d.named:
@@ -166,6 +177,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
                               if not is_outlier(k)},
                 "influence_units": {k: view.small(k)[0] for k in t.influence
                                     if not is_outlier(k)},
+                "mdb_test": _mdb_test(t),
                 "retained": t.retained, "absorbed_by": t.absorbed_by, "reason": t.reason}
 
     return {
@@ -183,6 +195,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
                             for o, i, a, b in d.swaps],
         "largest_residuals": largest_residuals(d, view),
         "gap": {"before": _gap(view, d.before), "after": _gap(view, d.after)},
+        "noise_scale": noise_scale(d.after),
         "rms_unit": view.rms_unit,
         "base_physics": dict(view.base_physics),
         "alpha": d.alpha,
@@ -193,7 +206,8 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         "candidates": [candidate(t) for t in d.steps[0].tests],
         "candidates_after": [candidate(t) for t in d.steps[-1].tests],
         "steps": [{"model": list(s.fit.effects), "chi2_red": s.fit.chi2_red,
-                   "p_value": s.fit.p_value, "winner": s.winner, "group": list(s.group),
+                   "p_value": s.fit.p_value, "global_p_adjusted": s.global_p,
+                   "winner": s.winner, "group": list(s.group),
                    "dropped": s.dropped} for s in d.steps],
     }
 
@@ -228,7 +242,8 @@ def format_text(report: Mapping[str, Any]) -> str:
         lines.append("known physics in the base model: " + ", ".join(
             k.replace("_", " ") + ("" if v is True else f" = {v:g}") for k, v in physics.items()))
     if not report["detected"]:
-        lines.append("global test passes: no missing effect")
+        lines.append("nothing rejected (global test, candidates, observations; Holm): "
+                     "no missing effect")
     for e in report["named_effects"]:
         values = ", ".join(f"{k} = {v:.4g} ± {e['stderr'][k]:.2g}{_unit(e['units'][k])}"
                            for k, v in e["parameters"].items())
@@ -261,6 +276,10 @@ def format_text(report: Mapping[str, Any]) -> str:
     if report["detected"]:
         lines.append(f"adapted model: chi2_red = {a['chi2_red']:.3f} (dof {a['dof']}), "
                      f"p = {a['p_value']:.3g}, rms = {a['rms']:.4g} {unit}")
+    if "noise_scale" in report:
+        stated = {k.replace("_", " "): v for k, v in physics.items()
+                  if "sigma" in k and isinstance(v, int | float) and not isinstance(v, bool)}
+        lines.append(format_noise(report["noise_scale"], stated))
     if report["unexplained"]:
         lines.append("a misfit remains that no candidate explains; the largest standardised "
                      "residuals are at:")
@@ -270,20 +289,26 @@ def format_text(report: Mapping[str, Any]) -> str:
                          f"sigma; {where}")
     lines.append("")
     lines.append(f"{'candidate (base model)':<24} {'status':<12} {'T':>9} {'dof':>3} "
-                 f"{'p (Holm)':>9}  MDB")
+                 f"{'p (Holm)':>9}  MDB (its own test at size a, power {POWER:g})")
     for c in report["candidates"]:
         mdb = ", ".join(f"{k} {v:.3g}{_unit(c['units'][k])}" for k, v in c["mdb"].items())
+        if c.get("mdb_test"):
+            mdb += f" (chi2({c['dof']}), a = {c['mdb_test']['size']:.3g})"
         stat = f"{c['statistic']:9.2f}" if math.isfinite(c["statistic"]) else f"{'-':>9}"
         p = f"{c['p_adjusted']:9.3g}" if math.isfinite(c["p_adjusted"]) else f"{'-':>9}"
         lines.append(f"{c['name']:<24} {c['status']:<12} {stat} {c['dof']:>3} {p}  "
                      f"{mdb or c['reason']}")
     lines.append("")
-    lines.append("what the final model could still miss: MDB of each candidate and the largest "
-                 "shift it would cause, undetected at its MDB, in the fitted parameters")
+    lines.append("what the final model could still miss: MDB of each candidate (its own test "
+                 "at size a) and the largest shift it would cause, undetected at its MDB, in "
+                 "the fitted parameters")
+    dropped = {e["name"] for e in report["dropped_effects"]}
     for c in report["candidates_after"]:
-        if c["status"] not in ("testable", "undetectable"):
+        if c["status"] not in ("testable", "undetectable") or c["name"] in dropped:
             continue
         mdb = ", ".join(f"{k} {v:.3g}{_unit(c['units'][k])}" for k, v in c["mdb"].items())
+        if c.get("mdb_test"):
+            mdb += f" (chi2({c['dof']}), a = {c['mdb_test']['size']:.3g})"
         worst = sorted(c["influence"].items(), key=lambda kv: -abs(kv[1]))[:3]
         shift = ", ".join(f"{k} {v:.3g}{_unit(c['influence_units'][k])}" for k, v in worst)
         lines.append(f"  {c['name']:<24} MDB {mdb}; shifts {shift}")

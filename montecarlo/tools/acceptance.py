@@ -103,9 +103,9 @@ def power_given(effect: str, given: tuple[str, ...], multiple: float = 2.0,
 
     Returns ``injected`` (its first parameter [SI]), ``mdb`` (that parameter's MDB given
     ``given``, :func:`montecarlo.discrepancy.design.design_mdb`), ``lambda`` (noncentrality
-    of the injection given ``given``), ``lambda0`` (the chain's, there) and ``power``: the
-    probability that the global test (``alpha``) still rejects once ``given`` is fitted,
-    the step the diagnosis needs to go on to ``effect``.
+    of the injection given ``given``), ``lambda0`` (its own test's, there) and ``power``: the
+    probability that its own test, at its first-step size in the detection family, rejects
+    once ``given`` is fitted.
     """
     p = {**sd.GROUND_DEFAULTS, **OTHER_DESIGNS["ground"]}
     camera = Camera(p["fov_yaw"], p["fov_pitch"], p["n_x"], p["n_z"])
@@ -125,7 +125,8 @@ def power_given(effect: str, given: tuple[str, ...], multiple: float = 2.0,
     return {"injected": injection[name],
             "mdb": design_mdb(problem, truth, given, effect, alpha=alpha)[name],
             "lambda": lam, "lambda0": test.lambda0,
-            "power": float(stats.ncx2.sf(stats.chi2.isf(alpha, fit.dof), fit.dof, lam))}
+            "power": float(stats.ncx2.sf(stats.chi2.isf(test.level, test.dof), test.dof,
+                                         lam))}
 
 
 def robust_scenarios(system: str) -> list[dict[str, Any]]:

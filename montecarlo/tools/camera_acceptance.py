@@ -33,7 +33,7 @@ from montecarlo.camera_calibration.simulate import (
     target_grid,
 )
 from montecarlo.discrepancy import camera_effects as ce
-from montecarlo.discrepancy.candidate_tests import ALPHA, analyse_candidates
+from montecarlo.discrepancy.candidate_tests import ALPHA, analyse_candidates, family_levels
 from montecarlo.discrepancy.design import design_mdb
 from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
@@ -76,8 +76,10 @@ def injections(sigma: float, grid: int = 8, multiple: float = 3.0) -> dict[str, 
     # each corner's MDB along (1, 1), as design_mdb computes it, from one fit
     full = with_outliers(exact)
     fit = fit_model(full, (), exact.start)
+    effects = analyse_candidates(replace(full, candidates=exact.candidates), fit)
+    share = family_levels(ALPHA, sum(math.isfinite(t.statistic) for t in effects), True)[1]
     snoop = analyse_candidates(replace(full, candidates=full.candidates[len(
-        exact.candidates):]), fit)
+        exact.candidates):]), fit, level=lambda k: share / k)
     mdb = {}
     for i, t in enumerate(snoop):
         v = t.projected @ np.ones(t.projected.shape[1])
