@@ -515,8 +515,8 @@ def test_no_good_mirror_flagged_with_an_unrecorded_1_degree_roll(sim, side, sens
 
 
 def test_a_data_set_once_adapted_to_a_singular_model_names_the_roll():
-    """A data set of an earlier second simulator (left, ccw, rolls at 2 x MDB) on which, when the roll
-    came after another effect, the model adapted with ``ins_roll`` had a singular normal
+    """A data set of an earlier second simulator (left, ccw, rolls at 2 x MDB) on which, when the
+    roll came after another effect, the model adapted with ``ins_roll`` had a singular normal
     matrix (the diagnosis then went on without it). In the detection family the roll's own
     test wins the first step: it is named, adapted without trouble, and the final model
     passes."""
