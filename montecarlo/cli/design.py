@@ -32,23 +32,19 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     """The base ground design (--study or the built-in one) and its [spec] table, if any."""
     from montecarlo.design import sizing_problem
     from montecarlo.engine.study import read_study_file
-    from montecarlo.systems import study_from_dict
+    from montecarlo.systems import study_from_dict, study_with_errors
 
     errors = getattr(args, "errors", None)
     if args.study is None:
         if errors is None:
             return sizing_problem.DEFAULT_DESIGN, None
-        from montecarlo.engine.study import merge_errors_file
-
-        raw = merge_errors_file(sizing_problem.DEFAULT_DESIGN, errors)
-        study_from_dict(raw, errors)  # a bad value named, before any work
-        return raw, None
+        raw, _ = study_with_errors(sizing_problem.DEFAULT_DESIGN, "the built-in design", errors)
+        return raw, None  # a bad value named in the errors file, before any work
     raw = read_study_file(args.study)
-    if errors is not None:
-        from montecarlo.engine.study import merge_errors_file
-
-        raw = merge_errors_file(raw, errors)
-    study = study_from_dict(raw, args.study)  # every mistake named in the file, before any work
+    if errors is not None:  # every mistake named in its file, before any work
+        raw, study = study_with_errors(raw, args.study, errors)
+    else:
+        study = study_from_dict(raw, args.study)
     if study.header.system != "ground":
         raise InputError(f"{args.study}: study.system: sizing and budgets need a ground study "
                          f"(got {study.header.system!r})")

@@ -37,12 +37,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.systems import load_study
 
     if args.errors:
-        from montecarlo.engine.study import merge_errors_file, read_study_file
-        from montecarlo.systems import study_from_dict
+        from montecarlo.engine.study import read_study_file
+        from montecarlo.systems import study_with_errors
 
-        study = study_from_dict(merge_errors_file(read_study_file(args.study), args.errors),
-                                args.study, trials=args.trials, seed=args.seed,
-                                max_points=args.max_points)
+        _, study = study_with_errors(read_study_file(args.study), args.study, args.errors,
+                                     trials=args.trials, seed=args.seed,
+                                     max_points=args.max_points)
     else:
         study = load_study(args.study, trials=args.trials, seed=args.seed,
                            max_points=args.max_points)
