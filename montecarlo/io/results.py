@@ -112,8 +112,11 @@ def check_unchanged(path: str | Path, prov: dict[str, Any], command: str,
     if entries is None:
         extra = [rel for rel in found if rel not in listed]
         if extra:
-            raise InputError(f"{path}: {extra[0]!r} was not written by `montecarlo run`; move "
-                             f"it out of the result before {command}")
+            names = ", ".join(repr(rel) for rel in extra[:3]) + \
+                (f" and {len(extra) - 3} more" if len(extra) > 3 else "")
+            raise InputError(f"{path}: {names} {'was' if len(extra) == 1 else 'were'} not "
+                             f"written by `montecarlo run`; move them out of the result "
+                             f"before {command}")
 
 
 def _entry(size: int | str | None) -> str:
