@@ -287,3 +287,14 @@ def test_errors_file_mistakes_are_named_in_the_errors_file(tmp_path, capsys):
     study.write_text(SMALL.replace("trials = 200", "trials = 0"))  # the study's own mistake
     refused(capsys, ["run", str(study), "--errors", str(errors), "--out", str(tmp_path / "out")],
             "small.toml", "study.trials")
+
+
+def test_an_unknown_output_of_a_problem_file_is_named_there(tmp_path, capsys):
+    """The output name became the budget's metric; its refusal named an internal study."""
+    path = tmp_path / "problem.json"
+    path.write_text(json.dumps({**PROBLEM, "outputs": ["banana"]}))
+    line = refused(capsys, ["budget", "--from-problem-spec", str(path), "--limit", "3",
+                            "--out", str(tmp_path / "out")], "problem.json", "outputs[0]",
+                   "banana")
+    assert "<" not in line
+    assert not (tmp_path / "out").exists()
