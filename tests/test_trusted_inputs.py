@@ -161,6 +161,8 @@ EDITS = {
     "metrics-renamed": (_summary_edit(lambda t: t.assign(metric=t["metric"] + "_x")),
                         ("summary.parquet",)),
     "summary-csv-edited": (_csv_digit_changed, ("summary.csv", "edited")),
+    "report-md-edited": (lambda d: (d / "report.md").write_text("my conclusions\n"),
+                         ("report.md",)),
 }
 
 

@@ -83,12 +83,15 @@ def _short(value: Any) -> str:
 
 
 def check_unchanged(path: str | Path, prov: dict[str, Any], command: str,
-                    entries: Iterable[str] | None = None) -> None:
+                    entries: Iterable[str] | None = None, redrawn: tuple[str, ...] = ()
+                    ) -> None:
     """Refuse a result directory whose entries differ from the list its command recorded.
 
     ``entries``: the listed entries to check (every one of them must be there, of the same
     kind, size and checksum); None checks the whole directory, where an entry the command
-    did not write is refused too. A result without a list (an older version) is not checked.
+    did not write is refused too. ``redrawn``: top-level entries the reading command writes
+    again, which may be missing (nothing is lost) but not changed. A result without a list
+    (an older version) is not checked.
     """
     path = Path(path)
     listed = prov.get(FILES_KEY)
@@ -101,6 +104,8 @@ def check_unchanged(path: str | Path, prov: dict[str, Any], command: str,
         if rel not in listed:
             continue
         want, got = listed[rel], found.get(rel, "missing")
+        if got == "missing" and rel.split("/")[0] in redrawn:
+            continue
         if got != want:
             raise InputError(f"{path}: {rel!r} is {_entry(got)} where `montecarlo run` wrote "
                              f"{_entry(want)}: the result was changed since; {command} refuses "

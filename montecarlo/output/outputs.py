@@ -32,7 +32,7 @@ from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
-from montecarlo.output.saved import HISTOGRAMS, histogram_table, load_result
+from montecarlo.output.saved import HISTOGRAMS, REDRAWN, histogram_table, load_result
 
 
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
@@ -113,7 +113,7 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
             raise InputError(f"{plots}: not the directory `montecarlo run` wrote; move it out "
                              "before drawing the plots again")
         names = _redraw(path, result, summary, prov, fmt)
-        update_written_files(path, ("plots", "report.md", "report.html"))
+        update_written_files(path, REDRAWN)
     return names, prov
 
 

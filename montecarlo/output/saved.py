@@ -22,6 +22,8 @@ from montecarlo.io.results import check_unchanged, read_parquet_table, read_prov
 from montecarlo.systems import study_from_dict
 
 HISTOGRAMS = "histograms.parquet"
+REDRAWN = ("plots", "report.md", "report.html")
+"""What ``montecarlo report`` draws again: may be missing from a result it reads."""
 
 
 def histogram_table(result: StudyResult) -> pd.DataFrame:
@@ -55,7 +57,7 @@ def load_result(path: str | Path, command: str = "report"
         raise InputError(f"{path}: written by an older montecarlo without {HISTOGRAMS}; "
                          "run the study again")
     check_unchanged(path, prov, command, None if command == "report" else
-                    ("summary.parquet", HISTOGRAMS))
+                    ("summary.parquet", HISTOGRAMS), redrawn=REDRAWN)
     marker = path / PROVENANCE
     if not isinstance(prov["study_source"], dict):
         raise InputError(f"{marker}: study_source: not a table (got "
