@@ -42,12 +42,12 @@ def read_provenance(path: str | Path, kind: str, command: str) -> dict[str, Any]
     try:
         prov = json.loads(marker.read_bytes().decode("utf-8"))
     except FileNotFoundError:
-        raise InputError(f"{path}: no {PROVENANCE}; not a result of `montecarlo {kind}`") \
-            from None
+        raise InputError(f"{path}: no readable {PROVENANCE}; not a result of "
+                         f"`montecarlo {kind}`") from None
     except (OSError, ValueError, RecursionError) as exc:
         why = exc.strerror if isinstance(exc, OSError) else str(exc).splitlines()[0][:80]
-        raise InputError(f"{marker}: not a readable JSON file ({why}); not a result "
-                         f"{command} can read") from None
+        raise InputError(f"{path}: no readable {PROVENANCE} ({why}); not a result of "
+                         f"`montecarlo {kind}`") from None
     if not isinstance(prov, dict):
         raise InputError(f"{marker}: not a JSON object; not a result of `montecarlo {kind}`")
     if RECORD_KEY in prov and prov[RECORD_KEY] != record_sha256(prov):
