@@ -237,14 +237,19 @@ def test_load_run_reads_a_result_and_refuses_anything_else_in_one_line(tmp_path)
                                                      "`montecarlo run`")):
         load_run(empty)
     (empty / "provenance.json").write_text("[1, 2]")  # JSON, but not an object
-    with pytest.raises(InputError, match=line(empty, "a result of `montecarlo None`, not of "
-                                                     "`montecarlo run`")):
+    with pytest.raises(InputError, match=line(empty / "provenance.json", "not a JSON object; "
+                                              "not a result of `montecarlo run`")):
         load_run(empty)
     (empty / "provenance.json").write_text(json.dumps({"kind": "run"}))
-    with pytest.raises(InputError, match=line(empty, "no readable summary.parquet")):
+    with pytest.raises(InputError, match=r"provenance\.json: study: missing"):
+        load_run(empty)
+    (empty / "provenance.json").write_text(json.dumps({"kind": "run", "study": "s",
+                                                       "study_hash": "h"}))
+    with pytest.raises(InputError, match=line(empty / "summary.parquet",
+                                              "missing from the result directory")):
         load_run(empty)
     (empty / "summary.parquet").write_text("not parquet")
-    with pytest.raises(InputError, match=r"no readable summary\.parquet"):
+    with pytest.raises(InputError, match=r"summary\.parquet: not a readable parquet file"):
         load_run(empty)
 
 

@@ -5,6 +5,7 @@ the lock, stale staging directories, and figures that render to the same bytes.
 The command-line view of the same rules is ``tests/test_output_safety.py``.
 """
 
+import hashlib
 import json
 import os
 import stat
@@ -108,7 +109,11 @@ def test_record_and_update_the_list_of_written_files(tmp_path):
     files.record_written_files(tmp_path)
     text = (tmp_path / PROVENANCE).read_text()
     assert text.endswith("}\n") and '\n  "kind": "run"' in text
-    assert json.loads(text) == {"kind": "run", "files": {"a": None, "a/f": 3, "b.txt": 1}}
+    sha = lambda data: hashlib.sha256(data).hexdigest()  # noqa: E731
+    sealed = sha(b'{"kind":"run"}')  # the record but its lists, as canonical JSON
+    assert json.loads(text) == {"kind": "run", "files": {"a": None, "a/f": 3, "b.txt": 1},
+                                "sha256": {"a/f": sha(b"123"), "b.txt": sha(b"1")},
+                                "record_sha256": sealed}
     (tmp_path / "a" / "f").write_bytes(b"123456")
     (tmp_path / "a" / "g").write_bytes(b"")
     (tmp_path / "b.txt").write_bytes(b"1234")  # not among the replaced: its old size is kept
@@ -116,7 +121,10 @@ def test_record_and_update_the_list_of_written_files(tmp_path):
     text = (tmp_path / PROVENANCE).read_text()
     assert text.endswith("}\n") and '\n  "kind": "run"' in text
     assert json.loads(text) == {"kind": "run",
-                                "files": {"a": None, "a/f": 6, "a/g": 0, "b.txt": 1}}
+                                "files": {"a": None, "a/f": 6, "a/g": 0, "b.txt": 1},
+                                "sha256": {"a/f": sha(b"123456"), "a/g": sha(b""),
+                                           "b.txt": sha(b"1")},
+                                "record_sha256": sealed}
     (tmp_path / "a" / "g").unlink()  # removed from a replaced entry: gone from the list
     files.update_written_files(tmp_path, ("a",))
     assert json.loads((tmp_path / PROVENANCE).read_text())["files"] == {
@@ -198,7 +206,7 @@ def test_output_dir_writes_all_or_nothing_and_lists_its_files(tmp_path, umask_02
         (staging / PROVENANCE).write_text(json.dumps({"kind": "run"}))
         (staging / "r.txt").write_text("12")
     assert sorted(x.name for x in out.parent.iterdir()) == ["out"]
-    assert json.loads((out / PROVENANCE).read_text()) == {"kind": "run", "files": {"r.txt": 2}}
+    assert json.loads((out / PROVENANCE).read_text())["files"] == {"r.txt": 2}
     with OutputDir(out, "run") as staging:  # an earlier result of the same kind: replaced
         (staging / PROVENANCE).write_text(json.dumps({"kind": "run"}))
         (staging / "s.txt").write_text("1")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 from montecarlo.cli.collimation_report import (
     fit_report,
@@ -136,39 +135,34 @@ def _fit_reference(args: argparse.Namespace) -> int:
 
 def _cmd_collimation_verify(args: argparse.Namespace) -> int:
     """``collimation verify FIT.json NEW.csv``: a saved fit applied to another data set."""
-    import json
-
     import numpy as np
 
     from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, procedure_data, read_mirror_csv
+    from montecarlo.io.json_file import field, read_json
     from montecarlo.seed003.conventions import SENSES, with_sense
     from montecarlo.seed003.procedure import NotDetermined
     from montecarlo.seed003.reference import SIDES
     from montecarlo.seed003.verification import verify
 
     check_json_option(args)
-    try:
-        saved = json.loads(Path(args.fit).read_text())
-    except OSError as exc:
-        raise InputError(f"{args.fit}: cannot read ({exc.strerror})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{args.fit}: not JSON ({exc.msg}, line {exc.lineno})") from None
-    try:
-        if saved.get("readings") != "reference":
-            raise KeyError("readings")
-        gamma = float(saved["parameters"]["axis_az"]) * ARCSEC
-        lam = float(saved["parameters"]["axis_el"]) * ARCSEC
-        side = SIDES[saved["roll_mirror"]["chosen"]]
-        sense = saved["azimuth_sense"]["chosen"]
-        SENSES[sense]
-        settings = saved["settings"]
-        free_roll = bool(settings["free_roll"])
-        roll_sigma = math.radians(float(settings["roll_sigma_deg"]))
-        s_ins = float(saved["sigma_arcsec"]["ins"]) * ARCSEC
-        s_theo = float(saved["sigma_arcsec"]["theodolite"]) * ARCSEC
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise InputError(f"{args.fit}: not a fit saved by 'collimation fit --json' under "
-                         f"--readings reference (field {exc})") from None
+    fit = args.fit
+    saved = read_json(fit, "fit file (written by 'collimation fit --json')")
+    if not isinstance(saved, dict) or saved.get("readings") != "reference":
+        raise InputError(f"{fit}: readings: not a fit saved by 'collimation fit --json' under "
+                         "--readings reference")
+    limit = 180.0 * 3600.0  # an offset beyond half a turn [arcsec] is not an offset
+    gamma = field(saved, "parameters.axis_az", fit, float, low=-limit, high=limit) * ARCSEC
+    lam = field(saved, "parameters.axis_el", fit, float, low=-limit, high=limit) * ARCSEC
+    side = SIDES[field(saved, "roll_mirror.chosen", fit, str, choices=tuple(SIDES))]
+    sense = field(saved, "azimuth_sense.chosen", fit, str, choices=tuple(SENSES))
+    free_roll = field(saved, "settings.free_roll", fit, bool)
+    roll_sigma = math.radians(field(saved, "settings.roll_sigma_deg", fit, float, positive=True,
+                                    high=180.0))
+    s_ins = field(saved, "sigma_arcsec.ins", fit, float, low=0.0, high=limit) * ARCSEC
+    s_theo = field(saved, "sigma_arcsec.theodolite", fit, float, low=0.0, high=limit) * ARCSEC
+    if s_ins == 0.0 and s_theo == 0.0:
+        raise InputError(f"{fit}: sigma_arcsec: ins and theodolite are both 0; at least one "
+                         "must be > 0")
     readings = read_mirror_csv(args.data, 1, "one mirror", sets=SETS + REFERENCE_SETS)
     data = with_sense(procedure_data(readings), sense)
     if not data.measured.size:

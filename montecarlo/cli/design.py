@@ -32,23 +32,19 @@ def _design_base(args: argparse.Namespace) -> tuple[dict, dict | None]:
     """The base ground design (--study or the built-in one) and its [spec] table, if any."""
     from montecarlo.design import sizing_problem
     from montecarlo.engine.study import read_study_file
-    from montecarlo.systems import study_from_dict
+    from montecarlo.systems import study_from_dict, study_with_errors
 
     errors = getattr(args, "errors", None)
     if args.study is None:
         if errors is None:
             return sizing_problem.DEFAULT_DESIGN, None
-        from montecarlo.engine.study import merge_errors_file
-
-        raw = merge_errors_file(sizing_problem.DEFAULT_DESIGN, errors)
-        study_from_dict(raw, errors)  # a bad value named, before any work
-        return raw, None
+        raw, _ = study_with_errors(sizing_problem.DEFAULT_DESIGN, "the built-in design", errors)
+        return raw, None  # a bad value named in the errors file, before any work
     raw = read_study_file(args.study)
-    if errors is not None:
-        from montecarlo.engine.study import merge_errors_file
-
-        raw = merge_errors_file(raw, errors)
-    study = study_from_dict(raw, args.study)  # every mistake named in the file, before any work
+    if errors is not None:  # every mistake named in its file, before any work
+        raw, study = study_with_errors(raw, args.study, errors)
+    else:
+        study = study_from_dict(raw, args.study)
     if study.header.system != "ground":
         raise InputError(f"{args.study}: study.system: sizing and budgets need a ground study "
                          f"(got {study.header.system!r})")
@@ -124,9 +120,10 @@ def _problem_spec_paths(target: str | None, relations: list[str]) -> dict[str, P
 
 def _cmd_budget(args: argparse.Namespace) -> int:
     from montecarlo.design import budget, budget_report, problem_spec
-    from montecarlo.design.sizing_problem import KNOBS
+    from montecarlo.design.sizing_problem import DESIGN_LABEL, KNOBS
 
     base, spec = _design_base(args)
+    metric_from = "--metric"
     if args.from_problem_spec:
         given = problem_spec.read_problem_spec(args.from_problem_spec)
         base, relation = problem_spec.apply_problem_spec(base, given, args.from_problem_spec)
@@ -137,6 +134,7 @@ def _cmd_budget(args: argparse.Namespace) -> int:
             args.relations = [relation]
         if given.get("outputs") and args.metric is None:
             args.metric = str(given["outputs"][0])
+            metric_from = f"{args.from_problem_spec}: outputs[0]"
     spec_paths = _problem_spec_paths(args.problem_spec, args.relations)
     for path in spec_paths.values():
         writable_file(path, args.force)
@@ -151,10 +149,16 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     req = _requirement(args, spec)
     out = Path(args.out)
     with OutputDir(out, "budget") as staging:
-        results = [budget.budget(base, req, rel, pt, samples=args.samples, seed=args.seed,
-                                 trials=args.trials, resamples=args.resamples,
-                                 n_jobs=args.n_jobs)
-                   for rel, pt in points.items()]
+        try:
+            results = [budget.budget(base, req, rel, pt, samples=args.samples, seed=args.seed,
+                                     trials=args.trials, resamples=args.resamples,
+                                     n_jobs=args.n_jobs)
+                       for rel, pt in points.items()]
+        except InputError as exc:  # an unknown metric: named where it was given
+            prefix = f"{DESIGN_LABEL}: spec.metric:"
+            if str(exc).startswith(prefix):
+                raise InputError(f"{metric_from}:{str(exc)[len(prefix):]}") from None
+            raise
         budget_report.write_budget(results, staging)
         write_provenance(staging, "budget", seed=args.seed, base_study=args.study,
                          requirement=vars(req), points=points, samples=args.samples,

@@ -20,6 +20,8 @@ from montecarlo.cli.common import (
 from montecarlo.errors import InputError
 
 FORMATS = ("png", "svg", "pdf")
+ONLY_SHOWN = 10
+"""Rows of one run only that ``compare`` lists without --all."""
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -35,12 +37,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from montecarlo.systems import load_study
 
     if args.errors:
-        from montecarlo.engine.study import merge_errors_file, read_study_file
-        from montecarlo.systems import study_from_dict
+        from montecarlo.engine.study import read_study_file
+        from montecarlo.systems import study_with_errors
 
-        study = study_from_dict(merge_errors_file(read_study_file(args.study), args.errors),
-                                args.study, trials=args.trials, seed=args.seed,
-                                max_points=args.max_points)
+        _, study = study_with_errors(read_study_file(args.study), args.study, args.errors,
+                                     trials=args.trials, seed=args.seed,
+                                     max_points=args.max_points)
     else:
         study = load_study(args.study, trials=args.trials, seed=args.seed,
                            max_points=args.max_points)
@@ -98,25 +100,36 @@ def _cmd_nightly(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from montecarlo.output.compare import compare_runs, confidence_of, load_run, verdict_counts
+    from montecarlo.output.compare import (
+        compare_runs,
+        confidence_of,
+        load_run,
+        match_rows,
+        verdict_counts,
+    )
 
     check_json_option(args)
     a, b = load_run(args.run_a), load_run(args.run_b)
     spec = a.provenance.get("resolved_study", {}).get("spec") or {}
     statistic = args.statistic or spec.get("statistic", "p95")
     table = compare_runs(a, b, statistic, args.rtol, args.allow_different)
+    _, only_a, only_b, keys = match_rows(a, b)
     counts = verdict_counts(table)
     mode = table["comparison"].iloc[0] if table["comparison"].nunique() == 1 else "mixed"
     if not emit_json(args, {"a": str(a.path), "b": str(b.path), "study": a.name,
                             "statistic": statistic, "comparison": mode, "counts": counts,
-                            "rows": table.to_dict("records")}):
+                            "rows": table.to_dict("records"),
+                            "only_a": only_a.to_dict("records"),
+                            "only_b": only_b.to_dict("records")}):
         level = f"{confidence_of(a):.0%}"
         how = ("paired: same seed and trials, so every difference is the code's"
                if mode == "paired" else "independent samples: differences judged on "
                f"simultaneous {level} intervals over the independent rows (Bonferroni)"
                if mode == "independent" else "paired and independent rows; the independent "
                f"ones on simultaneous {level} intervals (Bonferroni)")
-        print(f"{a.name}: {b.path} against {a.path}, {statistic} ({how})")
+        names = a.name if a.name == b.name else f"{a.name} and {b.name}"
+        print(f"{names}: {b.path} against {a.path}, {statistic} ({how}); rows matched on "
+              f"{', '.join([*keys, 'variant', 'metric'])}")
         shown = table if args.all else table[table["verdict"] != "same"]
         if len(shown):
             view = shown.drop(columns=["statistic", "comparison"]).copy()
@@ -124,7 +137,16 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                 view[col] = view[col].map(lambda v: f"{v:.6g}")
             view["rel_diff"] = view["rel_diff"].map(lambda v: f"{v:+.3%}")
             print(view.to_string(index=False))
-        print(", ".join(f"{n} {v}" for v, n in counts.items() if n) + f" of {len(table)} rows")
+        for run, only in ((a, only_a), (b, only_b)):
+            if len(only):
+                shown = only if args.all else only.head(ONLY_SHOWN)
+                more = f", the first {len(shown)} (--all: every one)" if len(shown) < len(only) \
+                    else ""
+                print(f"{len(only)} rows only in {run.path}, not compared{more}:")
+                print(shown.to_string(index=False))
+        print(", ".join(f"{n} {v}" for v, n in counts.items() if n) + f" of {len(table)} rows"
+              + "".join(f"; {len(o)} only in {r.path}" for r, o in ((a, only_a), (b, only_b))
+                        if len(o)))
     return 1 if counts["worse"] else 0
 
 

@@ -98,38 +98,54 @@ def _source(path: str, name: str, dist: str, bounds: Sequence[float]) -> dict[st
 
 def read_problem_spec(path: str | Path) -> dict[str, Any]:
     """A SALib problem file as a dict (names, bounds; optional dists, groups, outputs)."""
-    path = Path(path)
-    try:
-        spec = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such problem file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: not a JSON problem file ({exc})") from None
-    return read_problem_spec_dict(spec, str(path))
+    from montecarlo.io.json_file import read_json
+
+    return read_problem_spec_dict(read_json(path, "problem file"), str(path))
 
 
-def read_problem_spec_dict(spec: Any, path: str = "<problem>") -> dict[str, Any]:
+def _short(value: Any) -> str:
+    text = json.dumps(value, default=str)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def read_problem_spec_dict(spec: Any, path: str = "problem file") -> dict[str, Any]:
     """A parsed SALib problem checked and completed (dists default to unif, groups to the
-    names)."""
+    names): ``names``, ``groups`` and ``dists`` lists of texts, ``bounds`` a list of lists of
+    finite numbers, ``outputs`` a list of texts, ``num_vars`` the number of names."""
     if not isinstance(spec, dict):
         raise InputError(f"{path}: not a SALib problem (a JSON object with names and bounds)")
     for key in ("names", "bounds"):
         if not isinstance(spec.get(key), list) or not spec[key]:
-            raise InputError(f"{path}: {key}: required, a non-empty list")
+            raise InputError(f"{path}: {key}: required, a non-empty list (got "
+                             f"{_short(spec.get(key))})")
     spec = dict(spec)
     n = len(spec["names"])
     spec.setdefault("dists", ["unif"] * n)
     spec.setdefault("groups", list(spec["names"]))
     for key in ("bounds", "dists", "groups"):
         if not isinstance(spec[key], list) or len(spec[key]) != n:
-            raise InputError(f"{path}: {key}: needs one entry per name ({n}), got "
-                             f"{len(spec[key]) if isinstance(spec[key], list) else spec[key]!r}")
-    if "num_vars" in spec and spec["num_vars"] != n:
-        raise InputError(f"{path}: num_vars: {spec['num_vars']!r} but {n} names")
+            got = len(spec[key]) if isinstance(spec[key], list) else _short(spec[key])
+            raise InputError(f"{path}: {key}: needs one entry per name ({n}), got {got}")
+    if "outputs" in spec and not isinstance(spec["outputs"], list):
+        raise InputError(f"{path}: outputs: a list of output names (got {_short(spec['outputs'])})")
+    for key in ("names", "groups", "dists", "outputs"):
+        for i, item in enumerate(spec.get(key, [])):
+            if not isinstance(item, str):
+                raise InputError(f"{path}: {key}[{i}]: not a text (got {_short(item)})")
+    for i, bounds in enumerate(spec["bounds"]):
+        if not isinstance(bounds, list) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in bounds):
+            raise InputError(f"{path}: bounds[{i}] ({spec['names'][i]}): a list of numbers (got "
+                             f"{_short(bounds)})")
+        if not all(math.isfinite(x) for x in bounds):
+            raise InputError(f"{path}: bounds[{i}] ({spec['names'][i]}): not finite numbers "
+                             f"(got {_short(bounds)})")
+    if "num_vars" in spec and (isinstance(spec["num_vars"], bool) or spec["num_vars"] != n):
+        raise InputError(f"{path}: num_vars: {_short(spec['num_vars'])} but {n} names")
     return spec
 
 
-def errors_from_problem_spec(spec: Mapping[str, Any], path: str = "<problem>"
+def errors_from_problem_spec(spec: Mapping[str, Any], path: str = "problem file"
                              ) -> tuple[dict[str, Any], str | None]:
     """The study's ``[errors]`` entries a problem sets, and the pixel relation its names say
     (None if it has no pixel factor)."""
@@ -179,7 +195,7 @@ def _centre(source: Any) -> float:
 
 
 def apply_problem_spec(base: Mapping[str, Any], spec: Mapping[str, Any],
-                       path: str = "<problem>") -> tuple[dict[str, Any], str | None]:
+                       path: str = "problem file") -> tuple[dict[str, Any], str | None]:
     """The ground study ``base`` with its error sources set from a SALib problem, and the pixel
     relation the problem's names say (None without pixel factors). A source the problem does
     not list is fixed at its centre in ``base``."""

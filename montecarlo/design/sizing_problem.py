@@ -291,6 +291,11 @@ def design_overrides(base: Mapping[str, Any], point: Mapping[str, float]) -> dic
     return out
 
 
+DESIGN_LABEL = "the design made of the study file and the options"
+"""What a mistake in a design's study is blamed on: not one file but the base study with its
+--errors, --from-problem-spec, knobs and requirement options applied."""
+
+
 def ground_study(base: Mapping[str, Any], requirement: Requirement,
                  overrides: Sequence[Mapping[str, Any]], relation: str, *, trials: int, seed: int,
                  block_size: int, name: str = "sizing"):
@@ -310,7 +315,7 @@ def ground_study(base: Mapping[str, Any], requirement: Requirement,
                    "limit": req.limit}
     if overrides and overrides[0]:
         raw["sweep"] = [{"mode": "zip", **{k: [o[k] for o in overrides] for k in overrides[0]}}]
-    return study_from_dict(raw, f"<{name}>")
+    return study_from_dict(raw, DESIGN_LABEL)
 
 
 def build_study(problem: SizingProblem, points: Sequence[Mapping[str, float]], relation: str,

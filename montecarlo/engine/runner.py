@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import _thread
 import contextlib
+import json
 import logging
 import math
 import os
@@ -95,8 +96,12 @@ class StudyResult:
         return self.nominal
 
     def _sweep_value(self, key: str, value: Any) -> Any:
-        """Sweep values as they go in a column: text if the key mixes numbers and text."""
-        kinds = {isinstance(p.values[key], str) for p in self.study.points}
+        """Sweep values as they go in a column: text if the key mixes numbers and text, JSON
+        text if any value is a list or a table (a cell holds one value)."""
+        values = [p.values[key] for p in self.study.points]
+        if any(isinstance(v, (list, dict)) for v in values):
+            return json.dumps(value, sort_keys=True)
+        kinds = {isinstance(v, str) for v in values}
         return str(value) if len(kinds) > 1 else value
 
     def to_frame(self) -> pd.DataFrame:

@@ -354,8 +354,9 @@ def _check_swept_base_values(path: Path, system: System, raw: dict[str, Any],
                                  ) from None
 
 
-def read_study_file(path: str | Path) -> dict[str, Any]:
-    """The parsed TOML of a study file; every problem is one line naming the file."""
+def read_study_file(path: str | Path, what: str = "study file") -> dict[str, Any]:
+    """The parsed TOML of a study file (or of another TOML file: ``what`` names its kind in
+    the messages); every problem is one line naming the file."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -364,9 +365,9 @@ def read_study_file(path: str | Path) -> dict[str, Any]:
                              "which TOML does not allow; save it as UTF-8 without BOM")
         return tomllib.loads(data.decode("utf-8"))
     except FileNotFoundError:
-        raise InputError(f"{path}: no such study file") from None
+        raise InputError(f"{path}: no such {what}") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a study file") from None
+        raise InputError(f"{path}: is a directory, not a {what}") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
@@ -383,7 +384,7 @@ def merge_errors_file(raw: dict[str, Any], path: str | Path) -> dict[str, Any]:
     InputError
         The file is missing or not TOML, or holds anything but an ``[errors]`` table.
     """
-    extra = read_study_file(path)
+    extra = read_study_file(path, "errors file")
     if not isinstance(extra.get("errors"), dict) or set(extra) != {"errors"}:
         other = sorted(set(extra) - {"errors"})
         raise InputError(f"{path}: an errors file holds one [errors] table"
@@ -395,6 +396,24 @@ def merge_errors_file(raw: dict[str, Any], path: str | Path) -> dict[str, Any]:
         raise InputError(f"{path}: errors: the study's errors is not a table")
     table.update(copy.deepcopy(extra["errors"]))
     return merged
+
+
+def study_with_errors(raw: dict[str, Any], path: str | Path, errors: str | Path,
+                      systems: Systems, **options: Any) -> tuple[dict[str, Any], Study]:
+    """The study ``raw`` (read from ``path``) with its ``[errors]`` table updated from the
+    errors file ``errors`` (:func:`merge_errors_file`): the merged dict and its study.
+
+    A mistake is named in the file that makes it: the study file's own, else the errors
+    file's (an unknown or invalid error source it brings). ``options`` go to
+    :func:`study_from_dict`.
+    """
+    merged = merge_errors_file(raw, errors)
+    try:
+        return merged, study_from_dict(merged, systems, path, **options)
+    except InputError:
+        study_from_dict(raw, systems, path, **options)  # the study's own mistake, named in it
+        study_from_dict(merged, systems, errors, **options)  # else the errors file's
+        raise
 
 
 def load_study(path: str | Path, systems: Systems, *, trials: int | None = None,

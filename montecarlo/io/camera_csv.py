@@ -33,6 +33,9 @@ FloatArray = NDArray[np.float64]
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 """Length units of model points -> metres."""
 
+MAX_COORDINATE = 1e6
+"""Largest model coordinate accepted, in the file's unit (1 km in mm): a target is a plate."""
+
 MIN_POINTS_PER_VIEW = 4
 """A homography needs four points."""
 
@@ -74,10 +77,12 @@ def read_model_csv(path: str | Path) -> tuple[dict[str, FloatArray], str]:
     Raises
     ------
     InputError
-        Missing column, non-numeric coordinate, unknown or mixed unit, repeated id, fewer than
-        four points.
+        Missing column, non-numeric coordinate or one beyond +-:data:`MAX_COORDINATE`, unknown
+        or mixed unit, repeated id, fewer than four points.
     """
     table = read_table(path, ("X", "Y"), text=("id", "unit"), choices={"unit": UNITS},
+                       ranges={"X": (-MAX_COORDINATE, MAX_COORDINATE),
+                               "Y": (-MAX_COORDINATE, MAX_COORDINATE)},
                        min_rows=MIN_POINTS_PER_VIEW)
     units = table["unit"].tolist()
     for i, u in enumerate(units):

@@ -45,6 +45,17 @@ FILES_KEY = "files"
 """The key of ``provenance.json`` that lists what the command wrote: relative path -> size in
 bytes (None for a directory). Anything else found in the directory makes it the user's."""
 
+HASHES_KEY = "sha256"
+"""The key of ``provenance.json`` that lists the SHA-256 of each file the command wrote (up to
+:data:`HASHED_BYTES`): relative path -> hex digest; an edit that keeps the size is seen too."""
+
+RECORD_KEY = "record_sha256"
+"""The key of ``provenance.json`` that holds the SHA-256 of its own other entries (all but
+:data:`FILES_KEY`, :data:`HASHES_KEY` and itself, as canonical JSON): an edit is seen."""
+
+HASHED_BYTES = 256 * 2 ** 20
+"""Larger files are listed by size only."""
+
 RESULTS_ROOT = Path("results")
 """The default root of result directories (``results/<study>/``); never itself a result."""
 
@@ -83,10 +94,38 @@ def written_files(directory: Path) -> dict[str, int | None]:
     return dict(sorted(entries.items()))
 
 
+def file_sha256(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(2 ** 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def file_hashes(directory: Path, files: dict[str, int | None]) -> dict[str, str]:
+    """SHA-256 of the regular files among ``files`` (relative path -> size) up to
+    :data:`HASHED_BYTES`."""
+    return {rel: file_sha256(directory / rel) for rel, size in files.items()
+            if size is not None and 0 <= size <= HASHED_BYTES}
+
+
+def record_sha256(record: dict[str, Any]) -> str:
+    """SHA-256 of a provenance record's entries but its lists of files (:data:`RECORD_KEY`)."""
+    import hashlib
+
+    body = {k: v for k, v in record.items() if k not in (FILES_KEY, HASHES_KEY, RECORD_KEY)}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def record_written_files(directory: Path) -> None:
-    """Add the list of ``directory``'s entries (:data:`FILES_KEY`) to its ``provenance.json``
-    (nothing if it has none): what the command wrote, checked before the directory is
-    replaced."""
+    """Add the list of ``directory``'s entries (:data:`FILES_KEY`), their checksums
+    (:data:`HASHES_KEY`) and the record's own (:data:`RECORD_KEY`) to its ``provenance.json``
+    (nothing if it has none): what the command wrote, checked before the directory is replaced
+    or read back."""
     marker = directory / PROVENANCE
     try:
         record = json.loads(marker.read_text())
@@ -94,6 +133,8 @@ def record_written_files(directory: Path) -> None:
         return
     if isinstance(record, dict):
         record[FILES_KEY] = written_files(directory)
+        record[HASHES_KEY] = file_hashes(directory, record[FILES_KEY])
+        record[RECORD_KEY] = record_sha256(record)
         atomic_write_bytes(marker, (json.dumps(record, indent=2, default=str) + "\n").encode())
 
 
@@ -113,6 +154,10 @@ def update_written_files(directory: Path, replaced: tuple[str, ...]) -> None:
     now = {rel: size for rel, size in written_files(directory).items()
            if rel.split("/")[0] in replaced}
     record[FILES_KEY] = dict(sorted({**kept, **now}.items()))
+    if isinstance(record.get(HASHES_KEY), dict):
+        record[HASHES_KEY] = dict(sorted({**{rel: h for rel, h in record[HASHES_KEY].items()
+                                             if rel.split("/")[0] not in replaced},
+                                          **file_hashes(directory, now)}.items()))
     atomic_write_bytes(marker, (json.dumps(record, indent=2, default=str) + "\n").encode())
 
 

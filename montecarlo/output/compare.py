@@ -27,6 +27,7 @@ from scipy.special import ndtri
 from montecarlo.engine.superquantile import CVAR_DEFAULT
 from montecarlo.errors import InputError
 from montecarlo.io.files import PROVENANCE
+from montecarlo.io.results import check_unchanged, read_parquet_table, read_provenance
 
 STATISTICS = ("mean", "std", "p50", "p90", "p95", "p99", CVAR_DEFAULT, "max")
 """What ``compare`` can compare: the summary columns; the percentiles and the superquantile
@@ -56,22 +57,35 @@ class Run:
 
 
 def load_run(path: str | Path) -> Run:
-    """Read a result directory; a missing or foreign one is one line naming it."""
+    """Read a result directory of ``montecarlo run``, checked before it is compared: its
+    provenance (:func:`~montecarlo.io.results.read_provenance`), its summary unchanged since the
+    run wrote it (:func:`~montecarlo.io.results.check_unchanged`) and of the expected columns
+    and types. Anything else is one line naming the directory, the file and the field."""
     path = Path(path)
-    if not path.is_dir():
-        raise InputError(f"{path}: no such result directory")
-    try:
-        prov = json.loads((path / PROVENANCE).read_text())
-    except (OSError, ValueError):
-        raise InputError(f"{path}: no readable {PROVENANCE}; not a result of "
-                         "`montecarlo run`") from None
-    kind = prov.get("kind") if isinstance(prov, dict) else None
-    if kind != "run":
-        raise InputError(f"{path}: a result of `montecarlo {kind}`, not of `montecarlo run`")
-    try:
-        summary = pd.read_parquet(path / "summary.parquet")
-    except (OSError, ValueError):
-        raise InputError(f"{path}: no readable summary.parquet") from None
+    prov = read_provenance(path, "run", "compare")
+    check_unchanged(path, prov, "compare", ("summary.parquet",))
+    marker = path / PROVENANCE
+    resolved = prov.get("resolved_study", {})
+    header = resolved.get("study", {}) if isinstance(resolved, dict) else None
+    spec = resolved.get("spec") if isinstance(resolved, dict) else None
+    if not isinstance(header, dict) or not (spec is None or isinstance(spec, dict)):
+        raise InputError(f"{marker}: resolved_study: not the tables `montecarlo run` writes")
+    confidence = header.get("confidence", 0.95)
+    if isinstance(confidence, bool) or not isinstance(confidence, (int, float)) \
+            or not 0.0 < confidence < 1.0:
+        raise InputError(f"{marker}: resolved_study.study.confidence: {confidence!r} is not a "
+                         "number in (0, 1)")
+    if spec is not None and spec.get("statistic", "p95") not in STATISTICS:
+        raise InputError(f"{marker}: resolved_study.spec.statistic: {spec.get('statistic')!r} "
+                         f"is not one of {', '.join(STATISTICS)}")
+    numeric = [c for s in STATISTICS for c in (s, f"{s}_lo", f"{s}_hi")]
+    summary = read_parquet_table(path / "summary.parquet",
+                                 ["point", "variant", "metric", "unit", "count", "std"],
+                                 numeric=numeric, integer=["point", "count"])
+    columns = list(summary.columns)
+    if columns.index("variant") < columns.index("point"):
+        raise InputError(f"{path / 'summary.parquet'}: columns out of order (the sweep keys "
+                         "lie between 'point' and 'variant')")
     return Run(path, summary, prov)
 
 
@@ -80,16 +94,123 @@ def paired(a: Run, b: Run) -> bool:
     return a.provenance.get("study_hash") == b.provenance.get("study_hash")
 
 
-def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
-                 allow_different: bool = False) -> pd.DataFrame:
-    """One row per grid point, variant and metric found in both runs: ``a``, ``b``, ``diff``
-    (b - a), its interval ``diff_lo``, ``diff_hi``, ``rel_diff`` and ``verdict``.
+def _canonical(value: Any) -> str:
+    """A sweep value as a text that is equal for equal values however they were stored (2 and
+    2.0, a list and an array, a table in any key order)."""
+    def plain(v: Any) -> Any:
+        if isinstance(v, (bool, np.bool_)):
+            return bool(v)
+        if isinstance(v, (int, float, np.integer, np.floating)):
+            return float(v)
+        if isinstance(v, (list, tuple, np.ndarray)):
+            return [plain(x) for x in v]
+        if isinstance(v, dict):
+            return {str(k): plain(x) for k, x in v.items()}
+        return v
+    return json.dumps(plain(value), sort_keys=True, default=str)
+
+
+def _config_value(run: Run, point: int, key: str) -> Any:
+    """The value of the dotted ``key`` in the resolved configuration of grid point ``point``
+    of ``run`` (what the study ran with, defaults filled in); KeyError if it has none."""
+    points = run.provenance.get("resolved_study", {}).get("points")
+    if not isinstance(points, list) or not 0 <= point < len(points):
+        raise KeyError(key)
+    node: Any = points[point].get("config") if isinstance(points[point], dict) else None
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise KeyError(key)
+        node = node[part]
+    return node
+
+
+def grid_values(run: Run, keys: list[str], other: Run) -> pd.DataFrame:
+    """One row per row of ``run``'s summary: the value of every key of ``keys`` (as
+    :func:`_canonical` text), from the resolved configuration of its grid point where the
+    provenance has it, else from the summary's own sweep column.
 
     Raises
     ------
     InputError
-        Different studies (name or grid) unless ``allow_different``; then rows are matched on
-        the sweep values, variant and metric.
+        A key (a sweep key of ``other``) whose value in ``run`` cannot be told.
+    """
+    columns: dict[str, Any] = {}
+    points = run.summary["point"]
+    first = run.summary.groupby("point", sort=False).head(1)  # a row of each grid point
+    for key in keys:
+        values: dict[int, str] = {}
+        for row, p in zip(first.index, first["point"], strict=True):
+            try:
+                values[p] = _canonical(_config_value(run, int(p), key))
+            except KeyError:
+                if key not in run.sweep_keys:
+                    raise InputError(f"{run.path}: {PROVENANCE}: resolved_study has no value "
+                                     f"of {key!r} (a sweep key of {other.path}), so its rows "
+                                     "cannot be matched") from None
+                values[p] = _canonical(run.summary.at[row, key])
+        columns[key] = points.map(values)
+    return pd.DataFrame(columns, index=run.summary.index)
+
+
+def match_rows(a: Run, b: Run) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
+    """Rows of ``a`` and ``b`` that are the same grid point, variant and metric: matched on
+    every sweep key of both runs (a key only one run sweeps is taken at its fixed value in the
+    other), so a row matches at most one row. Returns the pairs (``row_a``, ``row_b``, index
+    into each summary), the rows of ``a`` only and of ``b`` only (their ``point``, keys,
+    ``variant``, ``metric``), and the keys.
+
+    Raises
+    ------
+    InputError
+        A run whose summary has two rows for one grid point, variant and metric (a row would be
+        paired twice), or a key whose value in a run cannot be told.
+    """
+    keys = list(dict.fromkeys([*a.sweep_keys, *b.sweep_keys]))
+    sides = []
+    for run, other in ((a, b), (b, a)):
+        frame = grid_values(run, keys, other)
+        frame["variant"] = run.summary["variant"].astype(str)
+        frame["metric"] = run.summary["metric"].astype(str)
+        repeated = frame.duplicated(keep=False)
+        if repeated.any():
+            row = frame[repeated].iloc[0]
+            raise InputError(f"{run.path}: summary.parquet: two rows for one grid point "
+                             f"({', '.join(f'{k}={row[k]}' for k in keys) or 'the base point'}, "
+                             f"variant {row['variant']}, metric {row['metric']}); cannot pair "
+                             "them")
+        sides.append(frame.assign(row=np.arange(len(frame))))
+    on = [*keys, "variant", "metric"]
+    merged = sides[0].merge(sides[1], on=on, how="outer", suffixes=("_a", "_b"),
+                            indicator=True)
+    pairs = merged[merged["_merge"] == "both"].sort_values("row_a")
+
+    def only(side: str, run: Run) -> pd.DataFrame:
+        column = "row_a" if side == "left" else "row_b"
+        picked = merged[merged["_merge"] == f"{side}_only"].sort_values(column)
+        rows = picked[column].astype(int).to_numpy()
+        shown = run.summary.iloc[rows][["point", "variant", "metric"]].reset_index(drop=True)
+        for i, k in enumerate(keys):  # as the run's summary shows it, else its resolved value
+            values = run.summary[k].iloc[rows].to_numpy() if k in run.sweep_keys else \
+                [json.loads(v) for v in picked[k]]
+            shown.insert(1 + i, k, values)
+        return shown
+
+    return (pairs[["row_a", "row_b"]].astype(int).reset_index(drop=True),
+            only("left", a), only("right", b), keys)
+
+
+def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
+                 allow_different: bool = False) -> pd.DataFrame:
+    """One row per grid point, variant and metric found in both runs: ``point`` (of ``a``),
+    every sweep key of both runs, ``variant``, ``metric``, ``a``, ``b``, ``diff`` (b - a), its
+    interval ``diff_lo``, ``diff_hi``, ``rel_diff`` and ``verdict``. Rows are matched by
+    :func:`match_rows` (each at most once); :func:`match_rows` also gives the rows of one run
+    only.
+
+    Raises
+    ------
+    InputError
+        Different studies (name or grid) unless ``allow_different``; no row in common.
     """
     if statistic not in STATISTICS:
         raise InputError(f"--statistic: {statistic!r} is not one of {', '.join(STATISTICS)}")
@@ -99,15 +220,21 @@ def compare_runs(a: Run, b: Run, statistic: str = "p95", rtol: float = RTOL,
         raise InputError(f"{a.path} and {b.path} are results of different studies "
                          f"({a.name} and {b.name}, or different grids); add "
                          "--allow-different to match their common grid points")
-    on = [*[k for k in keys if k in b.sweep_keys], "variant", "metric"]
+    pairs, _, _, keys = match_rows(a, b)
+    if pairs.empty:
+        raise InputError(f"{a.path} and {b.path} have no grid point in common")
     cols = list(dict.fromkeys(["unit", "sampling", "count", statistic, "std",
                                *([f"{statistic}_lo", f"{statistic}_hi"]
                                  if statistic not in ("mean", "std", "max") else [])]))
-    left = a.summary[["point", *on, *[c for c in cols if c in a.summary]]]
-    right = b.summary[[*on, *[c for c in cols if c in b.summary]]]
-    rows = left.merge(right, on=on, suffixes=("_a", "_b"))
-    if rows.empty:
-        raise InputError(f"{a.path} and {b.path} have no grid point in common")
+    left = a.summary.iloc[pairs["row_a"].to_numpy()].reset_index(drop=True)
+    right = b.summary.iloc[pairs["row_b"].to_numpy()].reset_index(drop=True)
+    for k in keys:  # a key one run does not sweep: its fixed value, as the other run's column
+        if k not in left:
+            left[k] = right[k]
+    on = [*keys, "variant", "metric"]
+    rows = pd.concat([left[["point", *on]],
+                      left[[c for c in cols if c in left]].add_suffix("_a"),
+                      right[[c for c in cols if c in right]].add_suffix("_b")], axis=1)
     same_draws = paired(a, b)
     confidence = confidence_of(a)
     z = float(ndtri(0.5 + confidence / 2.0))  # of each run's own intervals

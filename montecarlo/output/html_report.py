@@ -28,7 +28,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from montecarlo.io.files import FILES_KEY, PROVENANCE, atomic_write_bytes
+from montecarlo.io.files import (
+    FILES_KEY,
+    HASHES_KEY,
+    PROVENANCE,
+    RECORD_KEY,
+    atomic_write_bytes,
+)
 
 HTML_NAME = "report.html"
 SVG_RC = {"svg.hashsalt": "montecarlo-report", "svg.fonttype": "none"}
@@ -229,7 +235,7 @@ def provenance_table(prov: Mapping[str, Any]) -> str:
     The directory's list of written files is left out: it is written after the report and
     changes with it, so the same results would not give the same bytes."""
     keys = [k for k in PROVENANCE_FIELDS if k in prov]
-    skip = {"resolved_study", "study_source", "libraries", FILES_KEY}
+    skip = {"resolved_study", "study_source", "libraries", FILES_KEY, HASHES_KEY, RECORD_KEY}
     keys += sorted(k for k in prov if k not in keys and k not in skip)
     rows = []
     for k in keys:

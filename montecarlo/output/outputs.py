@@ -20,20 +20,19 @@ import pandas as pd
 from montecarlo.engine.runner import RunOptions, StudyResult
 from montecarlo.errors import InputError
 from montecarlo.io.files import (
-    FILES_KEY,
     PROVENANCE,
     OutputLock,
     atomic_write_bytes,
-    foreign_entries,
     save_figure,
     update_written_files,
+    with_umask,
 )
 from montecarlo.output.captions import figure_caption
 from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
-from montecarlo.output.saved import HISTOGRAMS, histogram_table, load_result
+from montecarlo.output.saved import HISTOGRAMS, REDRAWN, histogram_table, load_result
 
 
 def write_outputs(result: StudyResult, out_dir: Path, options: RunOptions,
@@ -98,22 +97,23 @@ def rerender(path: str | Path, fmt: str = "png") -> tuple[list[str], dict[str, A
 
     The new plots are drawn into a temporary directory beside ``plots/`` and swapped in only
     when all are drawn; report.md is replaced atomically. Nothing else in ``path`` changes. A
-    file the user added to ``plots/`` (not in the result's list of written files) is not
-    deleted: the command refuses. The lock of the result directory is held meanwhile
-    (:class:`montecarlo.io.files.OutputLock`), and the list of written files is brought up to
-    date afterwards.
+    result that no longer matches the list of files its run recorded (a file added, edited,
+    removed, or a file where a directory was) is refused before anything is drawn
+    (:func:`montecarlo.output.saved.load_result`). The lock of the result directory is held
+    meanwhile (:class:`montecarlo.io.files.OutputLock`), and the list of written files is
+    brought up to date afterwards.
     """
     path = Path(path)
-    result, summary, prov = load_result(path)
+    if not path.is_dir():
+        raise InputError(f"{path}: no such result directory")
     with OutputLock(path):
-        listed = prov.get(FILES_KEY)
-        foreign = [rel for rel in foreign_entries(path, prov) or []
-                   if rel.split("/")[0] == "plots" and rel not in (listed or {})]
-        if foreign:
-            raise InputError(f"{path}: {foreign[0]!r} was not written by `montecarlo run`; "
-                             "move it out of plots/ before drawing them again")
+        result, summary, prov = load_result(path)  # every file checked, under the lock
+        plots = path / "plots"
+        if plots.is_symlink() or (plots.exists() and not plots.is_dir()):
+            raise InputError(f"{plots}: not the directory `montecarlo run` wrote; move it out "
+                             "before drawing the plots again")
         names = _redraw(path, result, summary, prov, fmt)
-        update_written_files(path, ("plots", "report.md", "report.html"))
+        update_written_files(path, REDRAWN)
     return names, prov
 
 
@@ -122,13 +122,14 @@ def _redraw(path: Path, result: StudyResult, summary: pd.DataFrame, prov: dict[s
     for stale in [*path.glob(".plots.tmp-*"), *path.glob(".plots.old-*")]:  # a killed rerun's
         shutil.rmtree(stale, ignore_errors=True)
     staging = Path(tempfile.mkdtemp(prefix=".plots.tmp-", dir=path))
+    staging.chmod(with_umask(0o777))  # mkdtemp makes it private; `run` leaves plots/ shared
     try:
         names, figures = _draw(result, summary, staging, fmt)
         md = render_report(result, summary, prov, names)
         atomic_write_bytes(path / "report.md", md.encode())
         write_html(path, figures, f"Study {result.study.header.name}", md)
         old = path / "plots"
-        if old.exists():
+        if old.is_dir() and not old.is_symlink():
             retired = Path(tempfile.mkdtemp(prefix=".plots.old-", dir=path))
             old.rename(retired / "plots")
             staging.rename(old)

@@ -81,6 +81,14 @@ def load_study(path: str | Path, *, trials: int | None = None, seed: int | None 
     return _study.load_study(path, REGISTRY, trials=trials, seed=seed, max_points=max_points)
 
 
+def study_with_errors(raw: dict[str, Any], path: str | Path, errors: str | Path,
+                      **options: Any) -> tuple[dict[str, Any], Study]:
+    """The study ``raw`` (from ``path``) with its [errors] updated from the errors file
+    ``errors``, each mistake named in the file that makes it (see
+    :func:`montecarlo.engine.study.study_with_errors`)."""
+    return _study.study_with_errors(raw, path, errors, REGISTRY, **options)
+
+
 def study_from_dict(raw: dict[str, Any], path: str | Path = "<study>", *,
                     trials: int | None = None, seed: int | None = None,
                     max_points: int = _study.MAX_POINTS) -> Study:
