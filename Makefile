@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all lint nightly bench bench-full mutation clean
+.PHONY: install run test test-all acceptance lint nightly bench bench-full mutation clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,31 @@ test: install lint
 
 test-all: install lint
 	$(BIN)/pytest
+
+# every acceptance suite (the slow tests of one file) in a process of its own, two at a time;
+# each writes results/acceptance/<suite>.json (figures, bounds, commit, date, machine, run time;
+# tests/conftest.py). One suite: make acceptance SUITES=sizing
+SUITES ?= collimation_acceptance collimation_procedure_acceptance collimation_independent \
+	collimation_conventions discrepancy_acceptance procedure_effects \
+	ground_independent blind_camera_acceptance diagnose_camera reported_sigma \
+	stabilization_estimation stabilization_variants stabilization_independent \
+	diagnose_stabilization sizing superquantile nightly
+ACCEPTANCE_DIR ?= results/acceptance
+
+acceptance: install
+	@start=$$(date +%s); \
+	$(MAKE) --no-print-directory -k -j2 $(SUITES:%=acceptance-%); status=$$?; \
+	echo "make acceptance: $$(( $$(date +%s) - start )) s, results in $(ACCEPTANCE_DIR)/"; \
+	exit $$status
+
+acceptance-%: install
+	@test -n "$(wildcard tests/test_$*.py tests/independent/test_$*.py)" || \
+	(echo "no acceptance suite $*"; exit 2)
+	@mkdir -p $(ACCEPTANCE_DIR)
+	ACCEPTANCE_DIR=$(ACCEPTANCE_DIR) ACCEPTANCE_COMMAND="make acceptance SUITES=$*" \
+	nice -n 5 $(BIN)/pytest -q -p no:cacheprovider -m slow -n 0 \
+	$(firstword $(wildcard tests/test_$*.py tests/independent/test_$*.py)) \
+	> $(ACCEPTANCE_DIR)/$*.log 2>&1 || (tail -5 $(ACCEPTANCE_DIR)/$*.log; exit 1)
 
 nightly: install
 	$(BIN)/montecarlo nightly

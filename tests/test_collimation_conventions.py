@@ -45,7 +45,7 @@ NOISE = 2.0  # [arcsec] per theodolite angle and per INS reading
 SIGMA = math.hypot(NOISE, NOISE) * AS  # of a residual: theodolite and INS
 COMBOS = [(sim, side, sense) for sim in ("model", "blind") for side in ("right", "left")
           for sense in ("cw", "ccw")]
-CELL = 30  # per cell of the slow tests (`make acceptance`); 500 a cell took 3-8 min
+CELL = 20  # per cell of the slow tests (`make acceptance`); 500 a cell took 3-8 min
 
 
 def decidable_side(side: str, sense: str) -> str:

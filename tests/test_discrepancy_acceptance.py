@@ -70,13 +70,13 @@ def test_the_focal_scale_of_the_confounded_pair_is_below_its_mdb_given_the_range
 @pytest.mark.slow
 @pytest.mark.parametrize("system", ["ground", "collimation"])
 def test_full_acceptance(system, figures):
-    """500 trials a scenario. The share of the named effect's parameters within 2 sigma is bounded
+    """300 trials a scenario. The share of the named effect's parameters within 2 sigma is bounded
     from both sides by the binomial band of 95.45 % at the number of trials it was named in (one
     Bernoulli per trial: the mean of a trial's correlated parameters varies no more)."""
-    table = acc.run(system, trials=500, seed=2024, n_jobs=2)
+    table = acc.run(system, trials=300, seed=2024, n_jobs=2)
     print("\n" + acc.to_markdown(table))
     null = table[table.scenario == "null"].iloc[0]
-    assert null.trials >= 500
+    assert null.trials >= 300
     figures.record(slug(system, "null", "named_any"), null.named_any, None, 0.05)
     assert null.named_any <= 0.05
     if system == "ground":
@@ -106,7 +106,7 @@ def test_long_ranges_name_no_refraction_for_the_curvature():
 
 @pytest.mark.slow
 def test_long_range_acceptance(figures):
-    table = acc.run("ground", trials=250, seed=2024, n_jobs=2, cases=acc.physics_scenarios())
+    table = acc.run("ground", trials=200, seed=2024, n_jobs=2, cases=acc.physics_scenarios())
     print("\n" + acc.to_markdown(table))
     for r in table.itertuples():
         name = slug(r.scenario)
