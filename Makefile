@@ -24,14 +24,15 @@ test: install lint
 test-all: install lint
 	$(BIN)/pytest
 
-# every acceptance suite (the slow tests of one file) in a process of its own, two at a time;
+# every acceptance suite (the slow tests of one file) in a process of its own, two at a time,
+# the quicker first;
 # each writes results/acceptance/<suite>.json (figures, bounds, commit, date, machine, run time;
 # tests/conftest.py). One suite: make acceptance SUITES=sizing
-SUITES ?= collimation_acceptance collimation_procedure_acceptance collimation_independent \
-	collimation_conventions discrepancy_acceptance procedure_effects \
-	ground_independent blind_camera_acceptance diagnose_camera reported_sigma \
-	stabilization_estimation stabilization_variants stabilization_independent \
-	diagnose_stabilization sizing superquantile nightly
+SUITES ?= collimation_acceptance reported_sigma superquantile stabilization_estimation \
+	ground_independent blind_camera_acceptance diagnose_camera procedure_effects \
+	stabilization_independent diagnose_stabilization nightly sizing stabilization_variants \
+	collimation_procedure_acceptance collimation_independent discrepancy_acceptance \
+	collimation_conventions
 ACCEPTANCE_DIR ?= results/acceptance
 
 acceptance: install
@@ -58,7 +59,7 @@ bench: install
 bench-full: install
 	$(BIN)/montecarlo bench --full
 
-# one module or folder: make mutation MODULE=montecarlo/seed000/air.py (docs/testing.md)
+# one module or folder: make mutation MODULE=montecarlo/seed000/air.py (docs/validation/mutation.md)
 mutation: install
 	PYTHON_BIN=$(BIN)/python .ci/mutation $(MODULE)
 

@@ -9,7 +9,8 @@ lambda = -0.70 deg (the paper's fitted offsets), theodolite and INS errors 2″ 
 
 The blind simulator reads azimuths clockwise (``cw``) or counter-clockwise (``ccw``) with both
 instruments turning the same way, and puts "right" at +90 deg clockwise. Its ``ccw`` data are
-the mirror image of ``cw`` data with the other side (docs/collimation.md, "Conventions decided
+the mirror image of ``cw`` data with the other side (docs/reference/collimation.md, "Conventions
+decided
 by the data"): the side the data can decide is the side in the instruments' azimuth sense, so
 ``auto`` must return the blind side for ``cw`` and the other one for ``ccw``.
 """

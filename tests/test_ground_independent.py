@@ -36,7 +36,7 @@ EFFECTS = {  # hidden effect -> the effects a diagnosis may name for it
     "principal_point_px": ((1.5, -1.0), {("principal_point",)}),
     "focal_scale": (0.003, {("focal_scale",)}),
     # a lever arm is minus a common shift of all targets: with l_y = 0 the two biases
-    # (one parameter each) state it as well as the arm itself (docs/discrepancy.md)
+    # (one parameter each) state it as well as the arm itself (docs/reference/discrepancy.md)
     "lever_arm_m": ((0.2, 0.0, 0.15), {("lever_arm",),
                                        ("target_lateral_bias", "target_height_bias"),
                                        ("target_height_bias", "target_lateral_bias")}),

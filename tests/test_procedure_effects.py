@@ -312,7 +312,8 @@ def detection_rates_at(multiple: float, expected: str, extra: dict) -> tuple[flo
     """``(P_g, P_c)`` for ``expected`` injected at ``multiple`` times its MDB.
 
     The MDB is the size at which the candidate's projected columns carry the noncentrality
-    ``lambda0`` (power 0.8 at ``alpha``; docs/discrepancy.md); at ``multiple`` MDB they carry
+    ``lambda0`` (power 0.8 at ``alpha``; docs/reference/discrepancy.md); at ``multiple`` MDB they
+    carry
     ``multiple**2 lambda0``, all of it in the global statistic too (the columns are projected
     orthogonal to the model). ``P_g``: the global test, chi2(n - p) at ``alpha``, rejects under
     that noncentrality; ``P_c``: the candidate's own statistic, chi2(q), passes Holm's first

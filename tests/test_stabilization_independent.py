@@ -9,7 +9,8 @@ pinhole. Each recording is written by its command line (CSV and truth JSON), rea
 (the command-line entry point, in this process), and compared with the truth file.
 
 Its conventions (frames, rotation orders, angle signs, image axes, what a gyro row holds) all
-agree with the estimator's; docs/stabilization.md ("Conventions of the recordings") lists them.
+agree with the estimator's; docs/reference/stabilization.md ("Conventions of the recordings") lists
+them.
 Its recordings with one column's sign changed (another author's η, ε or image axis) check that
 the diagnosis names the difference.
 
