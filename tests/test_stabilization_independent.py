@@ -170,7 +170,7 @@ def test_a_recording_in_the_models_conventions_is_not_checked(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_sigma_is_honest_on_independent_recordings(tmp_path, capsys):
+def test_sigma_is_honest_on_independent_recordings(tmp_path, capsys, figures):
     """40 recordings with misalignments drawn in ±40′ and biases in ±2 °/h, the gimbal
     anywhere in ±40° azimuth and 0-40° elevation: Σ z² of each of the 8 parameters is χ²₄₀,
     inside its quantiles at 0.001/16 and 1 - 0.001/16."""
@@ -186,4 +186,6 @@ def test_sigma_is_honest_on_independent_recordings(tmp_path, capsys):
     z2 = np.sum(np.square(z), axis=0)
     lo, hi = stats.chi2.ppf([0.001 / 16, 1.0 - 0.001 / 16], len(z))
     print(dict(zip(PARAMETERS, (z2 / len(z)).round(2), strict=True)))
+    for name, value in zip(PARAMETERS, z2 / len(z), strict=True):
+        figures.record(f"{name}.mean_z2", value, lo / len(z), hi / len(z))
     assert np.all((lo < z2) & (z2 < hi)), dict(zip(PARAMETERS, z2 / len(z), strict=True))
