@@ -46,8 +46,15 @@ def pytest_runtest_logreport(report):
 
 
 def _git(*args: str) -> str:
-    done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
+    try:
+        done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
+    except OSError:  # no git: the record says so by an empty commit
+        return ""
     return done.stdout.strip()
+
+
+_COMMIT = _git("rev-parse", "HEAD")  # the commit the suite started on
+_MODIFIED = bool(_git("status", "--porcelain", "--untracked-files=no"))
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -61,14 +68,16 @@ def pytest_sessionfinish(session, exitstatus):
         record = {
             "suite": suite,
             "command": os.environ.get("ACCEPTANCE_COMMAND", ""),
-            "commit": _git("rev-parse", "HEAD"),
-            "tree_modified": bool(_git("status", "--porcelain", "--untracked-files=no")),
+            "commit": _COMMIT,
+            "tree_modified": _MODIFIED,
             "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
             "machine": {"host": platform.node(), "platform": platform.platform(),
                         "processor": platform.machine(), "cpus": os.cpu_count(),
                         "python": platform.python_version()},
             "run_time_s": round(took, 1),
-            "passed": all(v == "passed" for v in outcomes.values()),
+            "interrupted": exitstatus == pytest.ExitCode.INTERRUPTED,
+            "passed": (exitstatus != pytest.ExitCode.INTERRUPTED
+                       and all(v == "passed" for v in outcomes.values())),
             "tests": dict(sorted(outcomes.items())),
             "figures": dict(sorted(_SUITES.get(suite, Figures()).items.items())),
         }
