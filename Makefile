@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all lint nightly bench bench-full mutation clean
+.PHONY: install run test test-all acceptance lint nightly bench bench-full mutation clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -24,6 +24,32 @@ test: install lint
 test-all: install lint
 	$(BIN)/pytest
 
+# every acceptance suite (the slow tests of one file) in a process of its own, two at a time,
+# the quicker first;
+# each writes results/acceptance/<suite>.json (figures, bounds, commit, date, machine, run time;
+# tests/conftest.py). One suite: make acceptance SUITES=sizing
+SUITES ?= collimation_acceptance reported_sigma superquantile stabilization_estimation \
+	ground_independent blind_camera_acceptance diagnose_camera procedure_effects \
+	stabilization_independent diagnose_stabilization nightly sizing stabilization_variants \
+	collimation_procedure_acceptance collimation_independent discrepancy_acceptance \
+	collimation_conventions
+ACCEPTANCE_DIR ?= results/acceptance
+
+acceptance: install
+	@start=$$(date +%s); \
+	$(MAKE) --no-print-directory -k -j2 $(SUITES:%=acceptance-%); status=$$?; \
+	echo "make acceptance: $$(( $$(date +%s) - start )) s, results in $(ACCEPTANCE_DIR)/"; \
+	exit $$status
+
+acceptance-%: install
+	@test -n "$(wildcard tests/test_$*.py tests/independent/test_$*.py)" || \
+	(echo "no acceptance suite $*"; exit 2)
+	@mkdir -p $(ACCEPTANCE_DIR)
+	ACCEPTANCE_DIR=$(ACCEPTANCE_DIR) ACCEPTANCE_COMMAND="make acceptance SUITES=$*" \
+	nice -n 5 $(BIN)/pytest -q -p no:cacheprovider -m slow -n 0 \
+	$(firstword $(wildcard tests/test_$*.py tests/independent/test_$*.py)) \
+	> $(ACCEPTANCE_DIR)/$*.log 2>&1 || (tail -5 $(ACCEPTANCE_DIR)/$*.log; exit 1)
+
 nightly: install
 	$(BIN)/montecarlo nightly
 
@@ -33,7 +59,7 @@ bench: install
 bench-full: install
 	$(BIN)/montecarlo bench --full
 
-# one module or folder: make mutation MODULE=montecarlo/seed000/air.py (docs/testing.md)
+# one module or folder: make mutation MODULE=montecarlo/seed000/air.py (docs/validation/mutation.md)
 mutation: install
 	PYTHON_BIN=$(BIN)/python .ci/mutation $(MODULE)
 

@@ -7,7 +7,7 @@
 >>> result.report("results/table1-quick")                           # doctest: +SKIP
 
 A study is given as a path to a study file, as the dict a study file parses to, or as a loaded
-:class:`~montecarlo.engine.study.Study`. ``docs/api.md`` walks through an example.
+:class:`~montecarlo.engine.study.Study`. ``docs/reference/python-api.md`` walks through an example.
 """
 
 from __future__ import annotations

@@ -88,6 +88,13 @@ def test_least_squares_recovers_distortion_and_its_sigma_is_honest():
     noisy = calibrate(pts, pix, view, 5, ("k1", "k2", "p1", "p2"), sigma=0.1)
     z = {k: (noisy.params[k] - v) / noisy.stderr[k] for k, v in truth.items()}
     assert max(abs(v) for v in z.values()) < 4.5, z
+    # from both sides: with the covariance as reported, e' C^-1 e over the 9 compared parameters
+    # is chi-square with 9 dof; inside its central 99.9 % (a covariance 4 times too large
+    # puts a typical 9 at 2.25, in the band; one 10 times too large, at 0.9, below it)
+    idx = [noisy.names.index(k) for k in truth]
+    e = np.array([noisy.params[k] - v for k, v in truth.items()])
+    m2 = float(e @ np.linalg.solve(noisy.covariance[np.ix_(idx, idx)], e))
+    assert stats.chi2.ppf(0.0005, 9) < m2 < stats.chi2.ppf(0.9995, 9), m2
     assert noisy.rms == pytest.approx(0.1, rel=0.1)  # 640 coordinates: rel. sd 2.8 %
     # 640 coordinates - 39 parameters (5 intrinsics, 4 distortion, 6 per view) = 601 dof, and
     # chi2_red of the stated noise within its central 99.9 % band (sd sqrt(2/601) = 5.8 %)

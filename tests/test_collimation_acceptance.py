@@ -13,11 +13,14 @@ import pytest
 
 from montecarlo.systems import collimation as sc
 from montecarlo.units import ARCSEC
+from tests.acceptance import check_coverage, check_not_inflated
 
 pytestmark = pytest.mark.slow
 
 
-def test_offsets_within_2_sigma_and_residuals_match_noise():
+def test_offsets_within_2_sigma_and_residuals_match_noise(figures):
+    """Each offset within 2 sigma in the binomial band of 95.45 % at 1000 trials, its mean
+    (error/sigma)^2 not below chi-square's 0.001 quantile (sigma not inflated)."""
     n = 1000
     out = sc.run_trials({}, np.random.default_rng(2024), n)
     assert np.isfinite(out["axis_az_error"]).all()
@@ -26,9 +29,15 @@ def test_offsets_within_2_sigma_and_residuals_match_noise():
         print(f"{k}: within 2 sigma in {fraction:.3f} of {n} trials, MC std "
               f"{np.std(out[f'{k}_error']) / ARCSEC:.2f}″, predicted "
               f"{np.mean(out[f'{k}_sigma']) / ARCSEC:.2f}″")
-        assert fraction >= 0.90  # acceptance
+        check_coverage(figures, f"{k}_within_2sigma", int(np.sum(out[f"{k}_within_2sigma"])), n)
+        z = out[f"{k}_error"] / out[f"{k}_sigma"]
+        check_not_inflated(figures, f"{k}_mean_z2", float(np.sum(z**2)), n)
     ratio = np.mean(out["residual_rms_ratio"])
     print(f"mean residual RMS after / injected noise = {ratio:.3f}; expected sqrt(17/20) = "
           f"{math.sqrt(17 / 20):.3f} (3 of 20 degrees of freedom fitted)")
+    figures.record("residual_rms_ratio", ratio, 0.8, 1.2)
     assert abs(ratio - 1) <= 0.2  # acceptance
-    assert abs(math.sqrt(np.mean(out["chi2_red"])) - 1) <= 3 * math.sqrt(1 / (2 * 17 * n))
+    bound = 3 * math.sqrt(1 / (2 * 17 * n))
+    root_chi2 = figures.record("root_mean_chi2_red", math.sqrt(np.mean(out["chi2_red"])),
+                               1 - bound, 1 + bound)
+    assert abs(root_chi2 - 1) <= bound

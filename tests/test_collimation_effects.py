@@ -66,7 +66,7 @@ def base_tests(model=()):
 
 
 def test_collimation_and_ins_bias_are_absorbed_by_the_paper_model():
-    """docs/collimation.md: c has gamma's signature, a pitch bias lambda's, a heading bias
+    """docs/reference/collimation.md: c has gamma's signature, a pitch bias lambda's, a heading bias
     frame_heading's. With the axis offsets in the model the engine finds them absorbed."""
     tests = base_tests(("axis_misalignment",))
     assert tests["theodolite_collimation"].status == "absorbed"

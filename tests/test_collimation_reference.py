@@ -99,7 +99,8 @@ def test_reference_reading_errors_build_the_frame_from_the_axes_read(side):
 def test_reference_reading_errors_to_first_order(side):
     """No offsets, level mount, horizontal mirrors at alpha = az - az_c: an error e read at C or
     R moves the readings by heading -e_hC, pitch -e_pC cos(alpha) - s e_pR sin(alpha)
-    (docs/collimation.md, "The reference's own errors"); e_hR moves nothing to first order (the
+    (docs/reference/collimation.md, "The reference's own errors"); e_hR moves nothing to first
+    order (the
     roll mirror only sets the frame's x direction about y_R). Differences over 1e-7 rad."""
     az, el, az_c, step = np.array([-0.5, 0.2, 0.8, 2.0]), np.zeros(4), 0.1, 1e-7
     alpha = az - az_c
@@ -334,7 +335,8 @@ def test_free_roll_dof_counts_the_roll_prior(rows, expected_dof):
 
 
 def test_study_hands_the_fit_the_per_reading_ins_sigma(monkeypatch):
-    """docs/collimation.md: the procedure's fit takes sigma_INS per heading, pitch and roll
+    """docs/reference/collimation.md: the procedure's fit takes sigma_INS per heading, pitch and
+    roll
     read, not the root-sum-square of heading and pitch (a residual's). With INS heading and
     pitch errors of 3″ each and the theodolite's 2″, the fit must be handed 3″ and 2″, on the
     literal path (trial by trial) and on the block path."""

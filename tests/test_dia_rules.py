@@ -129,7 +129,8 @@ def kink_problem(eps=0.05):
 
 
 def test_an_effect_seen_first_as_two_wrong_observations_replaces_them():
-    """docs/discrepancy.md, Swap: before stopping with flagged observations, one effect fitted
+    """docs/reference/discrepancy.md, Swap: before stopping with flagged observations, one effect
+    fitted
     instead of all their shifts is tried. The two observations are flagged one after the other;
     the kink, fitted instead of both shifts, fits better with one parameter fewer: it is named,
     the shifts are dropped (no p-value: replaced, not tested), and the final model equals the

@@ -75,7 +75,7 @@ def tangent(pix, camera=CAM):
 
 
 def test_radial_distortion_scales_the_tangent_radius():
-    """r -> r (1 + k1 r^2) along the same image direction (docs/discrepancy.md)."""
+    """r -> r (1 + k1 r^2) along the same image direction (docs/reference/discrepancy.md)."""
     t0, t1 = tangent(predict({})), tangent(predict({"k1": 0.03}))
     r0, r1 = np.linalg.norm(t0, axis=1), np.linalg.norm(t1, axis=1)
     np.testing.assert_allclose(r1, r0 * (1 + 0.03 * r0**2), rtol=1e-12)

@@ -11,7 +11,7 @@ from montecarlo.systems import study_from_dict
 
 DEG_PER_H = math.pi / 180.0 / 3600.0  # [rad/s]
 MG = 9.80665e-3                        # [m/s^2]
-# docs/air.md, "IMU grades": gyro bias [deg/h] and accelerometer bias [mg] per grade
+# docs/reference/air.md, "IMU grades": gyro bias [deg/h] and accelerometer bias [mg] per grade
 TABLE = {"consumer": (100.0, 10.0), "industrial": (0.1, 0.1), "tactical": (1.0, 1.0),
          "navigation": (0.01, 0.03)}
 

@@ -1,4 +1,5 @@
-"""Error metrics of seed 000, eqs. (17)-(18), and the three rotation angles (docs/conventions.md).
+"""Error metrics of seed 000, eqs. (17)-(18), and the three rotation angles
+(docs/reference/conventions.md).
 """
 
 import numpy as np

@@ -38,7 +38,8 @@ def test_units_convert_to_si(tmp_path):
 
 
 def test_air_study_reproduces_the_rss_of_inputs(tmp_path):
-    """rms of phi = sqrt(3'^2 + 5'^2) = 1.696 mrad with no installation error (docs/air.md);
+    """rms of phi = sqrt(3'^2 + 5'^2) = 1.696 mrad with no installation error
+    (docs/reference/air.md);
     the standard error of an rms from n trials of a 3-D spread is about rms / sqrt(2 n)."""
     p = tmp_path / "air.toml"
     p.write_text(textwrap.dedent(AIR))

@@ -302,10 +302,11 @@ RELATIVE = json.dumps(pe.paper_layout(False).layout())
 
 @pytest.mark.slow
 @pytest.mark.parametrize("extra", [{}, {"layout": RELATIVE}])
-def test_null_procedure_data_name_nothing_in_98_percent(extra):
+def test_null_procedure_data_name_nothing_in_98_percent(extra, figures):
     """>= 98 % of 200 null calibrations: no effect named and no mirror flagged."""
     out = sd.run_collimation_trials({**REFERENCE, **extra}, np.random.default_rng(21), 200)
     clean = (out["named_any"] == 0) & (out["n_flagged"] == 0)
+    figures.record(f"null.{'relative' if extra else 'reference-rows'}.clean", clean.mean(), 0.98)
     assert clean.mean() >= 0.98
 
 
@@ -313,7 +314,8 @@ def detection_rates_at(multiple: float, expected: str, extra: dict) -> tuple[flo
     """``(P_g, P_c)`` for ``expected`` injected at ``multiple`` times its MDB.
 
     The MDB is the size at which the candidate's projected columns carry the noncentrality
-    ``lambda0`` (power 0.8 at ``alpha``; docs/discrepancy.md); at ``multiple`` MDB they carry
+    ``lambda0`` (power 0.8 at ``alpha``; docs/reference/discrepancy.md); at ``multiple`` MDB they
+    carry
     ``multiple**2 lambda0``, all of it in the global statistic too (the columns are projected
     orthogonal to the model). ``P_g``: the global test, chi2(n - p) at ``alpha``, rejects under
     that noncentrality; ``P_c``: the candidate's own statistic, chi2(q), passes Holm's first
@@ -344,7 +346,8 @@ def detection_rates_at(multiple: float, expected: str, extra: dict) -> tuple[flo
 @pytest.mark.parametrize(("expected", "extra"), [
     ("ins_scale_factor", {}), ("ins_scale_factor", {"layout": RELATIVE}),
     ("reading_model", {"layout": RELATIVE})])
-def test_candidates_at_twice_their_mdb_are_detected_as_the_power_says(expected, extra):
+def test_candidates_at_twice_their_mdb_are_detected_as_the_power_says(expected, extra,
+                                                                       figures):
     """At 2 MDB the noncentrality is 4 lambda0 (106 to 109 here): the global test detects with
     probability ``P_g`` >= 1 - 1e-7 (:func:`detection_rates_at`), so all but a binomial 0.1 %
     tail of the 60 sets must be detected (here: all 60); the candidate's own test passes too
@@ -363,13 +366,16 @@ def test_candidates_at_twice_their_mdb_are_detected_as_the_power_says(expected, 
     named = int(np.nansum(out["named_expected"]))
     print(f"{expected} {'relative' if extra else 'reference rows'}: detected {detected}/{n} "
           f"(P_g {p_g:.9f}), named {named}/{n} (P_g + P_c - 1 = {p_g + p_c - 1:.9f})")
+    case = f"{expected}.{'relative' if extra else 'reference-rows'}"
+    figures.record(f"{case}.detected", detected / n, stats.binom.ppf(1e-3, n, p_g) / n)
+    figures.record(f"{case}.named", named / n, stats.binom.ppf(1e-3, n, 0.8) / n)
     assert detected >= stats.binom.ppf(1e-3, n, p_g)
     assert p_g + p_c - 1.0 > 0.99  # the design makes identification near-certain too
     assert named >= stats.binom.ppf(1e-3, n, 0.8)
 
 
 @pytest.mark.slow
-def test_absolute_readings_analysed_as_the_procedure_name_the_reading_model():
+def test_absolute_readings_analysed_as_the_procedure_name_the_reading_model(figures):
     from montecarlo.discrepancy.design import score_trials
 
     layout = ce.paper_mirrors(5, 5, math.radians(75.0), math.radians(18.0))
@@ -377,6 +383,7 @@ def test_absolute_readings_analysed_as_the_procedure_name_the_reading_model():
     out = score_trials(lambda g: ce.simulate(layout, truth, Noise(), g),
                        lambda d: pe.procedure_problem(d, SIGMA), lambda d, f: 0.0, truth, (),
                        True, "reading_model", 0.01, np.random.default_rng(23), 60)
+    figures.record("absolute_readings.reading_model_named", out["named_expected"].mean(), 0.95)
     assert out["named_expected"].mean() >= 0.95
 
 

@@ -49,15 +49,16 @@ def test_readme_command_runs_as_printed(workdir, command):
 
 def test_the_python_examples_of_docs_api_run_and_print_what_they_show(workdir, monkeypatch,
                                                                         capsys):
-    """The code blocks of docs/api.md, run in order in one namespace; the printed table is the
+    """The code blocks of docs/reference/python-api.md, run in order in one namespace; the printed
+    table is the
     one the page shows."""
-    text = (ROOT / "docs" / "api.md").read_text()
+    text = (ROOT / "docs" / "reference" / "python-api.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     shown = re.search(r"prints .*?:\n\n```\n(.*?)```", text, re.S).group(1)
     monkeypatch.chdir(workdir)
     namespace: dict = {}
     for block in blocks:
-        exec(compile(block, "docs/api.md", "exec"), namespace)
+        exec(compile(block, "docs/reference/python-api.md", "exec"), namespace)
     out = capsys.readouterr().out
     assert shown.strip() in out
     assert "[1.14012739 1.31886844 1.51711446]" in out

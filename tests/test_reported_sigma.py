@@ -21,6 +21,7 @@ from montecarlo.discrepancy import ground_effects as ge
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.geometry.camera import Camera
 from montecarlo.systems import stabilization as ss
+from tests.acceptance import Figures
 
 P = 1e-3
 
@@ -57,11 +58,15 @@ def _ground_coverage(sets: int, seed: int) -> tuple[float, int, float, int]:
     return z2, 3 * sets, chi2, dof
 
 
-def _check_ground(sets: int, seed: int) -> None:
+def _check_ground(sets: int, seed: int, figures: Figures | None = None) -> None:
     z2, k, chi2, dof = _ground_coverage(sets, seed)
     lo, hi = _band(k, 2)
+    if figures is not None:
+        figures.record("ground.mean_z2", z2 / k, lo, hi)
     assert lo < z2 / k < hi, z2 / k
     lo, hi = _band(dof, 2)
+    if figures is not None:
+        figures.record("ground.chi2_red", chi2 / dof, lo, hi)
     assert lo < chi2 / dof < hi, chi2 / dof
 
 
@@ -73,8 +78,8 @@ def test_ground_fit_sigma_covers_its_error():
 
 
 @pytest.mark.slow
-def test_ground_fit_sigma_covers_its_error_over_many_sets():
-    _check_ground(1500, 8)
+def test_ground_fit_sigma_covers_its_error_over_many_sets(figures):
+    _check_ground(1500, 8, figures)
 
 
 # --- stabilisation: the recursive estimate of the four observable combinations ---------------
@@ -82,11 +87,14 @@ def test_ground_fit_sigma_covers_its_error_over_many_sets():
 COMBINATIONS = ("dpx", "dgx", "dgy", "dz", "dpy")
 
 
-def _check_stabilization(params: dict, trials: int, seed: int) -> None:
+def _check_stabilization(params: dict, trials: int, seed: int,
+                         figures: Figures | None = None) -> None:
     out = ss.run_trials(params, np.random.default_rng(seed), trials)
     lo, hi = _band(trials, len(COMBINATIONS))
     for q in COMBINATIONS:
         z2 = np.mean((out[f"{q}_error"] / out[f"{q}_sigma"]) ** 2)
+        if figures is not None:
+            figures.record(f"stabilization.{q}.mean_z2", z2, lo, hi)
         assert lo < z2 < hi, (q, z2)
 
 
@@ -97,6 +105,6 @@ def test_stabilization_sigma_covers_its_error():
 
 
 @pytest.mark.slow
-def test_stabilization_sigma_covers_its_error_over_many_runs():
+def test_stabilization_sigma_covers_its_error_over_many_runs(figures):
     """1000 runs at the defaults (60 s, 100 Hz; about 40 s)."""
-    _check_stabilization({}, 1000, 4)
+    _check_stabilization({}, 1000, 4, figures)

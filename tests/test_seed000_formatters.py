@@ -96,7 +96,7 @@ def test_table1_text_has_the_papers_columns_over_its_numbers():
 def test_table1_text_states_the_papers_setup():
     """Section 1.4 of the seed: 90 x 90 deg field of view, 512 x 512 px, true angles (30, 20,
     10) deg, dx, dy, dh1 within 0.1 m, the 2^6 error corners; the metric arccos((1 + tr D)/4)
-    (docs/conventions.md) and eq. (13) for 'norm'. Checked against the module's constants,
+    (docs/reference/conventions.md) and eq. (13) for 'norm'. Checked against the module's constants,
     which are the seed's."""
     text = table1.format_table1(_table1_by_hand())
     lines = text.splitlines()
@@ -159,7 +159,7 @@ def test_air_text_states_the_papers_figures_and_the_rss_of_its_inputs():
     """Seed 000, section 2: 1.70 mrad (1σ) and 5.10 mrad (3σ) from heading 3′ and level 5′
     (Table 2 rows 3-5) and installation within 1′. By hand: sqrt(3² + 5²) = sqrt(34) = 5.831′,
     times pi / 10800 rad per arc-minute = 1.6962 mrad. One D from a 3′ heading and one 5′ tilt
-    (docs/air.md): rotation angle 1.6962, eq. (18) half of it 0.8481, the Table 1 metric
+    (docs/reference/air.md): rotation angle 1.6962, eq. (18) half of it 0.8481, the Table 1 metric
     1.6962 / sqrt(2) = 1.1994 mrad."""
     lines = air.format_reproduction(_air_by_hand()).splitlines()
     assert lines[0] == ("Seed 000, section 2: air dynamic calibration (eq. 19). Paper: 1.70 mrad "

@@ -1,6 +1,7 @@
 """What seed 003's Figs. 3-6 and the procedure figure draw, read through matplotlib's objects
 (lines, axes, legends, titles), not pixels: every curve's data against closed forms written out
-here (first order in the offsets, docs/collimation.md) and against the deviation it is said to
+here (first order in the offsets, docs/reference/collimation.md) and against the deviation it is
+said to
 plot, its style and colour, the axis labels with their units, and which panels are marked zero."""
 
 import math
@@ -63,7 +64,8 @@ def test_pair_figure_curves_are_the_deviations_in_arc_seconds(pair):
     """Figs. 3-4 on alpha = 0, 0.5, ..., 180 deg, Figs. 5-6 on beta = 0, 0.25, ..., 80 deg (321
     points). Per panel, for each offset 0.02, 0.05, 0.1 deg (colours C0, C1, C2): solid the
     attitude change in the INS frame, dotted the difference of readings; left delta alpha, right
-    delta beta, in arc-seconds. Closed forms (first order, docs/collimation.md): Fig. 4 solid
+    delta beta, in arc-seconds. Closed forms (first order, docs/reference/collimation.md): Fig. 4
+    solid
     right ``lambda (cos alpha - 1)`` (-2 lambda at 180 deg) and dotted right 0; Fig. 5 left
     ``-gamma (1/cos beta - 1)`` in both views; the rest of order offset^2 (Figs. 3 and 6: zero,
     below 1e-6″). Tolerance: second order, 4 offset^2 / cos^2 (the largest angle) [rad]."""
@@ -130,7 +132,7 @@ def test_zero_panels_are_drawn_on_one_arc_second_and_say_how_small(pair):
 
 def _procedure_closed_forms(offset, az, el):
     """First order, level mount, central mirror (0, 0), roll mirror at 90 deg on the right (s =
-    1), docs/collimation.md: a horizontal mirror at azimuth alpha reads pitch
+    1), docs/reference/collimation.md: a horizontal mirror at azimuth alpha reads pitch
     ``-lambda (1 - cos alpha - sin alpha)`` and heading alpha (gamma drops out); a mirror at
     azimuth 0 and elevation e reads heading ``-gamma (1/cos e - 1) - lambda tan e`` and pitch
     e. Rows: gamma = offset, then lambda = offset."""

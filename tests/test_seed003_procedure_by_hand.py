@@ -103,7 +103,7 @@ def test_relative_readings_of_an_ins_without_offsets_are_the_mirror_angles():
 def test_residuals_without_offsets_are_the_first_order_form():
     """Reference rows, level mount recorded (rolls 0), no reading error, gamma = 120",
     lambda = -90": with the offsets held at zero nothing else is fitted, and reading minus model
-    is the first-order form (docs/collimation.md, s = +1, all rolls 0):
+    is the first-order form (docs/reference/collimation.md, s = +1, all rolls 0):
     heading ``gamma (1 - 1/cos el) + lambda tan el (sin az - cos az)``, pitch
     ``-lambda (1 - cos az - sin az)``, to second order ((|gamma| + |lambda|)^2 = 0.5")."""
     g, lam = 120 * A, -90 * A
@@ -204,7 +204,7 @@ def test_corrected_readings_meet_the_mirror_angles(rows, roll, side):
     """No reading error, central mirror at azimuth 0.2, rolled mount where recorded: the
     theodolite's angles relative to the central and the roll mirror are ``(az - 0.2, el)``; the
     readings corrected with the fitted offsets meet them; with the offsets set to zero the
-    corrected readings deviate by the first-order form of docs/collimation.md
+    corrected readings deviate by the first-order form of docs/reference/collimation.md
     (``gamma (1 - 1/cos el) + lambda tan el (sin a - s cos a)``, ``-lambda (1 - cos a - s sin a)``,
     a = az - 0.2, s the side, all rolls 0; second order below (|gamma| + |lambda|)^2 = 0.4")."""
     import dataclasses

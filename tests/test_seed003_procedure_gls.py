@@ -1,6 +1,7 @@
 """Seed 003's procedure fit (section 3.2) against a generalised least-squares fit written out here.
 
-The residuals are written from the definitions of docs/collimation.md ("The paper's procedure"):
+The residuals are written from the definitions of docs/reference/collimation.md ("The paper's
+procedure"):
 with reference rows the relative heading and pitch read at a measured mirror are the direction
 of its INS axis ``direction(heading, pitch)`` in the frame ``x = s normalize(a_r - (a_r . a_c)
 a_c), y = a_c, z = x cross y`` of the INS axes at the central and the roll mirror (Gram-Schmidt,

@@ -1,5 +1,5 @@
 """Seed 003's procedure: the acceptance harness and the pitch-reach search, against their
-docstrings (docs/collimation.md, "Acceptance of the procedure's fit").
+docstrings (docs/validation/collimation.md, "Acceptance of the procedure's fit").
 
 The harness tests record what ``acceptance_trials`` hands the simulator and the fit (a spy that
 calls the real simulator and stands in for the fit), so they check every option passed on

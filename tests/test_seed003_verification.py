@@ -21,7 +21,7 @@ def test_offsets_left_uncorrected_deviate_by_the_first_order_form():
     """Reference rows, level mount, no reading error, offsets gamma = 100", lambda = -80" not
     applied (0, 0): the corrected reading is the relative reading itself and the theodolite's
     relative angle is the mirror's (az, el), so the deviations are the first-order form of
-    docs/collimation.md with every roll 0 and s = +1:
+    docs/reference/collimation.md with every roll 0 and s = +1:
     heading: ``gamma (1 - 1/cos el) + lambda tan el (sin az - cos az)``,
     pitch: ``-lambda (1 - cos az - sin az)``; its error is second order, below
     ``(|gamma| + |lambda|)^2`` = 0.16″ (the deviations reach 21″)."""

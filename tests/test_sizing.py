@@ -154,7 +154,8 @@ def test_search_is_reproducible(pixel_sizing):
 
 
 def test_infeasible_bounds_are_reported_not_papered_over():
-    """Independent noise at L = 100 m, H = 2 m: even 0.05 px misses 3 mrad (docs/conventions.md: the
+    """Independent noise at L = 100 m, H = 2 m: even 0.05 px misses 3 mrad
+    (docs/reference/conventions.md: the
     error grows like sigma L / H)."""
     p = problem(sp.Knob("pixel_px", 0.05, 1.0))
     res = sz.size(p, sp.SizingOptions(levels=3, trials=2000, n_jobs=1, slice_levels=0),

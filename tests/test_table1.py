@@ -17,7 +17,8 @@ def test_table1_within_one_percent_of_paper(table):
     normalised Delta, mrad, two decimals) are reproduced within 1 %.
 
     The recipe (worst case over 2^6 corners, common pixel error, metric arccos((1 + tr D)/4))
-    is the one docs/conventions.md records; the printed values are used only here, as the reference.
+    is the one docs/reference/conventions.md records; the printed values are used only here, as the
+    reference.
     """
     rel = table1.relative_differences(table)
     assert rel.abs().to_numpy().max() < 0.01, rel

@@ -43,7 +43,8 @@ def test_s_turn_is_a_coordinated_turn():
 
 
 def test_aircraft_attitude_matches_scipy_zxy():
-    """C_{b_f}^g = Rotation.from_euler('ZXY', [psi, theta, gamma]) (active), docs/conventions.md."""
+    """C_{b_f}^g = Rotation.from_euler('ZXY', [psi, theta, gamma]) (active),
+    docs/reference/conventions.md."""
     cfg = ta.AlignmentConfig(manoeuvre="wing_rock", bank=0.3, period=8.0)
     t = np.array([1.0, 2.5])
     C_bn, _ = ta.aircraft_motion(cfg, t)
@@ -199,7 +200,8 @@ def test_bad_config_rejected():
 
 
 def test_default_table2_grid_regression():
-    """Stored values (docs/air.md, Table 2 comparison): filter 1σ heading and level RSS [′],
+    """Stored values (docs/reference/air.md, Table 2 comparison): filter 1σ heading and level RSS
+    [′],
     default configuration, to the two decimals printed there."""
     heading, level = [], []
     for row in t2.TABLE2_ROWS:

@@ -43,8 +43,8 @@ def conventions_text(conventions: dict) -> list[str]:
     if conventions["large_angles_deg"]:
         angles = ", ".join(f"{k} = {v:.1f} deg" for k, v in conventions["large_angles_deg"].items())
         lines.append(f"installation angles not small ({angles}): the recording's frames or signs "
-                     "differ from the model's (docs/stabilization.md, 'Conventions of the "
-                     "recordings')")
+                     "differ from the model's (docs/reference/stabilization.md, 'Conventions of "
+                     "the recordings')")
     for column in conventions["named"]:
         lines.append(f"convention: the model fits with {column} negated: the recording has "
                      f"{CONVENTIONS[column]}")

@@ -30,7 +30,7 @@ statistic is a smooth deterministic function of the knobs and monotone searches 
    cheaper point may then be "undecided" unless the trials resolve a rise of a few per cent.
 
 Everything is done separately for pixel noise common to both targets and independent between
-them (the two behave oppositely with range; docs/conventions.md).
+them (the two behave oppositely with range; docs/reference/conventions.md).
 """
 
 from __future__ import annotations

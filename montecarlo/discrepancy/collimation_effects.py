@@ -18,9 +18,9 @@ every other effect is a candidate, absent when its parameters are zero:
 * ``theodolite_collimation`` (``theodolite_c`` [rad]): the theodolite's line of sight off
   its tilting axis by c, read in one face: it reads azimuth ``az + c / cos(el)``.
 
-Known degeneracies (docs/collimation.md): the collimation c has exactly gamma's signature, an INS
-pitch bias lambda's, an INS heading bias frame_heading's; the engine finds them as absorbed or
-confounded from the Jacobian, nothing here encodes it.
+Known degeneracies (docs/reference/collimation.md): the collimation c has exactly gamma's
+signature, an INS pitch bias lambda's, an INS heading bias frame_heading's; the engine finds them
+as absorbed or confounded from the Jacobian, nothing here encodes it.
 
 References
 ----------

@@ -29,7 +29,8 @@ INS ``angle_sigma / sqrt 2`` each), which correlates them through the reference 
 
 References
 ----------
-seed 003, section 3.2 (procedure); docs/discrepancy.md ("Collimation: the procedure's readings").
+seed 003, section 3.2 (procedure); docs/reference/discrepancy.md ("Collimation: the procedure's
+readings").
 """
 
 from __future__ import annotations
@@ -100,7 +101,7 @@ def roll_parameters(data: MirrorData) -> tuple[str, ...]:
     """Parameters of ``ins_roll``: the roll at the roll reference pointing and at each measured
     mirror [rad], added to the recorded (or assumed zero) roll. The central pointing's roll is
     not one of them: a roll common to all pointings turns the offset about the INS axis, which
-    gamma and lambda already describe (docs/collimation.md, "Free rolls")."""
+    gamma and lambda already describe (docs/reference/collimation.md, "Free rolls")."""
     pd = procedure_data(data)
     return ("ins_roll_reference_roll",
             *(f"ins_roll_{data.mirror[i]}" for i in pd.measured))

@@ -32,7 +32,7 @@ levels are right.
 
 References
 ----------
-seed 001: patent CN102288133B, eqs. (1)-(4); docs/stabilization.md, "Diagnosis".
+seed 001: patent CN102288133B, eqs. (1)-(4); docs/validation/stabilization.md, "Diagnosis".
 """
 
 from __future__ import annotations

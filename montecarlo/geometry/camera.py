@@ -3,8 +3,9 @@
 Frame ``a`` (the product frame) has y along the optical axis and x, z parallel to the focal plane. A
 pixel coordinate is measured from the image centre: ``f_mx`` along x (positive to the right),
 ``f_mz`` along z (positive up). The text calls the pixel count that scales x ``f_x`` and the one
-that scales z ``f_z`` but labels them the other way round (docs/conventions.md); here ``n_x`` is the
-pixel count across x (the yaw field of view) and ``n_z`` across z (the pitch field of view).
+that scales z ``f_z`` but labels them the other way round (docs/reference/conventions.md); here
+``n_x`` is the pixel count across x (the yaw field of view) and ``n_z`` across z (the pitch field of
+view).
 
 Two equivalent forms are provided:
 

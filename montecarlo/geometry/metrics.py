@@ -2,7 +2,7 @@
 
 ``D = C_a^c = C_b^c (C_b^a)^T`` is the rotation from the true product frame a to the computed
 frame c. Three scalar "angles" of D appear around seed 000 and must never be confused
-(docs/conventions.md):
+(docs/reference/conventions.md):
 
 =================  ================================  ==========================================
 name               formula                           relation to the true rotation angle phi
@@ -58,7 +58,7 @@ def rotation_angle(D: ArrayLike) -> FloatArray:
 
     Examples
     --------
-    The three metrics of one error rotation of 1 mrad (docs/conventions.md):
+    The three metrics of one error rotation of 1 mrad (docs/reference/conventions.md):
 
     >>> from scipy.spatial.transform import Rotation
     >>> D = Rotation.from_rotvec([0.0, 0.0, 1e-3]).as_matrix()
@@ -91,12 +91,12 @@ def eq18_angle(D: ArrayLike) -> FloatArray:
 def table1_angle(D: ArrayLike) -> FloatArray:
     """The metric behind Table 1, ``arccos((1 + tr D) / 4)`` [rad]; about phi / sqrt(2).
 
-    Not a formula printed in seed 000: docs/conventions.md shows that all twelve values of
+    Not a formula printed in seed 000: docs/reference/conventions.md shows that all twelve values of
     Table 1 are reproduced by this expression (the paper's Delta and normalised Delta).
 
     References
     ----------
-    seed 000, Table 1; docs/conventions.md, "How seed 000's Table 1 was computed".
+    seed 000, Table 1; docs/reference/conventions.md, "How seed 000's Table 1 was computed".
     """
     return np.arccos(np.clip((1.0 + _trace(D)) / 4.0, -1.0, 1.0))
 

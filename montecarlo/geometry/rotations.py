@@ -1,7 +1,8 @@
 """Z-X-Y Euler rotations of seed 000: matrices from angles (eqs. 5, 7), angles back (eqs. 14, 17).
 
-Convention (docs/conventions.md): the attitude of frame a relative to frame b is a yaw ``psi`` about
-z, then a pitch ``theta`` about the new x, then a roll ``gamma`` about the new y (intrinsic Z-X-Y).
+Convention (docs/reference/conventions.md): the attitude of frame a relative to frame b is a yaw
+``psi`` about z, then a pitch ``theta`` about the new x, then a roll ``gamma`` about the new y
+(intrinsic Z-X-Y).
 The matrix of eq. (5) is the *passive* (frame-transformation) matrix ``C_b^a``, which maps
 coordinates in b to coordinates in a::
 

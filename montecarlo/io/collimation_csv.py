@@ -6,7 +6,7 @@
 the paper's procedure, section 3.2) ``reference_center`` / ``reference_roll``, the two reference
 mirrors; angles are in degrees in the file and radians inside. With the reference rows every INS
 reading is absolute; without them the readings are relative to the INS's reference
-(docs/collimation.md).
+(docs/reference/collimation.md).
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ by eq. (19) from the two reported attitudes; its rotation metrics (kept apart by
 References
 ----------
 seed 000, section 2, eq. (19) and the error relation after it, Table 2; eqs. (5), (17), (18).
-docs/conventions.md, "Seed 000: the air dynamic calibration".
+docs/reference/conventions.md, "Seed 000: the air dynamic calibration".
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ Literal, vectorised reference implementation: every step follows the paper's tri
 form (equivalent angles, eq. (7) matrices). Functions take whole batches of trials (leading axes
 broadcast) and flag invalid geometry per trial with :class:`montecarlo.geometry.invalid.Invalid`.
 
-Frames (docs/conventions.md): base b has x right, y forward, z up, origin at the sensor; target A is
-on the forward axis at range L and the sensor's height, target B is A raised by H.
+Frames (docs/reference/conventions.md): base b has x right, y forward, z up, origin at the sensor;
+target A is on the forward axis at range L and the sensor's height, target B is A raised by H.
 
 References
 ----------

@@ -3,7 +3,8 @@
 Same mathematics as the literal reference (:mod:`montecarlo.seed000.ground`, seed 000 eqs. 4-18)
 in another algebra, tested equal to it to 1e-12:
 
-* pixels from the tangent-plane form ``k u_x / u_y`` (no equivalent angles; docs/conventions.md);
+* pixels from the tangent-plane form ``k u_x / u_y`` (no equivalent angles;
+  docs/reference/conventions.md);
 * directions from pixels as ``[f_x / k_x, 1, f_z / k_z]`` normalised (eqs. 1-3 combined);
 * eq. (14) without inverse trigonometry: ``sin(theta) = C23``, ``cos(theta) = sqrt(1 - C23^2)``,
   ``(sin, cos)(gamma) = (-C13, C33) / hypot(C13, C33)``, ``sin(psi) = (C12 C33 - C13 C32) /
@@ -275,8 +276,8 @@ def metrics_in_place(fields: np.ndarray) -> None:
     The reference's formulas, evaluated by numpy's SIMD ufuncs over stacked rows; arctan2 of
     the full rather than the halved arguments of ``metrics.rotation_angle`` gives the same
     result, since halving is exact. Eq. (18) as printed, ``arccos(sqrt(1 + tr D)/2)``, is
-    exactly half the rotation angle (docs/conventions.md) and is taken as that: evaluating the
-    arccos form would only add its own round-off (see ``metrics.eq18_angle``).
+    exactly half the rotation angle (docs/reference/conventions.md) and is taken as that:
+    evaluating the arccos form would only add its own round-off (see ``metrics.eq18_angle``).
     """
     np.arctan2(fields[0:6], fields[6:12], out=fields[0:6])
     np.arccos(fields[12:14], out=fields[12:14])

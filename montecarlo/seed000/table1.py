@@ -1,8 +1,8 @@
 """Reproduction of seed 000, Table 1: worst-case ground calibration error over the error bounds.
 
-The paper prints twelve numbers (Delta and normalised Delta for six rows). docs/conventions.md
-records how they were computed, and this module recomputes them from the model, never from the
-printed values (those are kept only to be shown beside ours):
+The paper prints twelve numbers (Delta and normalised Delta for six rows).
+docs/reference/conventions.md records how they were computed, and this module recomputes them
+from the model, never from the printed values (those are kept only to be shown beside ours):
 
 * true mounting angles psi = 30 deg, theta = 20 deg, gamma = 10 deg; 90 x 90 deg field of view;
   512 x 512 pixels;
@@ -13,7 +13,8 @@ printed values (those are kept only to be shown beside ours):
 
 References
 ----------
-seed 000, section 1.4 and Table 1; docs/conventions.md, "How seed 000's Table 1 was computed".
+seed 000, section 1.4 and Table 1; docs/reference/conventions.md, "How seed 000's Table 1 was
+computed".
 """
 
 from __future__ import annotations

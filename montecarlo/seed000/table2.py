@@ -6,7 +6,7 @@ grades.
 
 References
 ----------
-seed 000, section 2 and Table 2; docs/air.md; docs/references.md.
+seed 000, section 2 and Table 2; docs/reference/air.md; docs/reference/references.md.
 """
 
 from __future__ import annotations

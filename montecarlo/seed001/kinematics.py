@@ -42,7 +42,8 @@ All functions broadcast: batch axes first, then time, then vector components ``(
 
 References
 ----------
-seed 001: patent CN102288133B (2013), eqs. (1)-(6); docs/conventions.md, "Seed 001: cautions".
+seed 001: patent CN102288133B (2013), eqs. (1)-(6); docs/reference/conventions.md, "Seed 001:
+cautions".
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ analysis (rank and Cramer-Rao bounds).
 
 References
 ----------
-seed 001: patent CN102288133B, eqs. (5)-(6); docs/stabilization.md; docs/references.md.
+seed 001: patent CN102288133B, eqs. (5)-(6); docs/reference/stabilization.md;
+docs/reference/references.md.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ angles, images the target the line of sight aimed at at ``t = 0``. Frames and si
 
 References
 ----------
-seed 001: patent CN102288133B, eqs. (1)-(4), claim 1 (second step); docs/references.md.
+seed 001: patent CN102288133B, eqs. (1)-(4), claim 1 (second step); docs/reference/references.md.
 """
 
 from __future__ import annotations

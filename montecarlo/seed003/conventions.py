@@ -3,7 +3,8 @@
 Section 3.1 puts the roll reference mirror "on the right of the device" (该装置右侧) without
 saying whose right, and the text never says which way the theodolite's and the INS's azimuths
 turn. The procedure's fit (:func:`montecarlo.seed003.procedure.fit_procedure`) is run under each
-candidate convention and the one with the smallest chi-square is taken (docs/collimation.md,
+candidate convention and the one with the smallest chi-square is taken
+(docs/reference/collimation.md,
 "Conventions decided by the data"):
 
 * **roll-mirror side** (``right``/``left``): readings relative to the INS's reference turn with

@@ -2,7 +2,7 @@
 
 References
 ----------
-seed 003, section 2 (Figs. 3-6); docs/collimation.md; docs/references.md.
+seed 003, section 2 (Figs. 3-6); docs/reference/collimation.md; docs/reference/references.md.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ Nonlinear least squares of the INS heading and pitch readings against the forwar
 
 References
 ----------
-seed 003, section 3.2 (least squares, iterated); docs/collimation.md; docs/references.md.
+seed 003, section 3.2 (least squares, iterated); docs/reference/collimation.md;
+docs/reference/references.md.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ mount), or fitted (``free_roll``: one absolute roll per pointing, reference poin
 each with the prior ``N(0, roll_sigma)``). With free rolls only the INS axis directions are
 observed, and these depend on the offsets only through their size ``angle(u, e_y)``: the
 direction of the offset in the (gamma, lambda) plane is fixed by the prior on the rolls alone
-(docs/collimation.md).
+(docs/reference/collimation.md).
 
 The fit is generalised least squares: the residual covariance is propagated from the reading
 errors (INS ``sigma_ins`` per heading, pitch and roll read; theodolite ``sigma_theodolite`` per
@@ -638,7 +638,8 @@ ACCEPTANCE_CASES = {
                              ("relative", "level", "right"),
                              ("relative", "free", "left"))
 }
-"""Acceptance cases: name -> (layout, reference rows?, roll, side) (docs/collimation.md)."""
+"""Acceptance cases: name -> (layout, reference rows?, roll, side)
+(docs/reference/collimation.md)."""
 
 
 def acceptance_case(name: str, n: int, seed: int) -> dict[str, FloatArray]:

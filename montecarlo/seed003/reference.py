@@ -21,7 +21,7 @@ about (x, y, z), so lambda does not drop out of relative readings.
 References
 ----------
 seed 003, section 3.1 (fixture: central reference mirror, roll mirror at 90 deg on the right) and
-section 3.2 (procedure); docs/collimation.md ("The paper's procedure").
+section 3.2 (procedure); docs/reference/collimation.md ("The paper's procedure").
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ def relative_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, el:
 
     References
     ----------
-    seed 003, section 3.2 (the procedure); docs/collimation.md ("The paper's procedure").
+    seed 003, section 3.2 (the procedure); docs/reference/collimation.md ("The paper's procedure").
     """
     C_c = attitude_at(axis_az, axis_el, *center)
     C_r = attitude_at(axis_az, axis_el, *roll_mirror)
@@ -211,7 +211,7 @@ def first_order_readings(axis_az: ArrayLike, axis_el: ArrayLike, az: ArrayLike, 
 
     References
     ----------
-    seed 003, section 3.2; derived in docs/collimation.md ("First-order form").
+    seed 003, section 3.2; derived in docs/reference/collimation.md ("First-order form").
     """
     g, lam = np.asarray(axis_az, float), np.asarray(axis_el, float)
 

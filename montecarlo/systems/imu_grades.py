@@ -10,8 +10,8 @@ biases per IMU grade). Where the book gives a range, the preset takes its lower 
 names map onto the book's: ``navigation`` = its aviation (navigation) grade, ``industrial`` =
 its intermediate grade, ``tactical`` = tactical, ``consumer`` = its automotive/consumer grade
 (a lower bound there: ">"). These figures were written down from the book and have not been
-checked against a copy of it in this repository's work: docs/air.md says so; check them before
-relying on them. Random-noise figures (angle random walk) are not preset, as none could be
+checked against a copy of it in this repository's work: docs/reference/air.md says so; check them
+before relying on them. Random-noise figures (angle random walk) are not preset, as none could be
 checked; give ``gyro_noise`` yourself.
 """
 

@@ -6,7 +6,8 @@ Runs ``studies/table1.toml`` and ``studies/trends.toml``, checks
 * under pixel error common to both targets: Delta falls with the range L, falls with the height
   difference H up to 2 m (the paper: "H matters below 2 m, little above"), rises with the pixel
   error df and with the height-scale error delta_b;
-* under independent pixel noise: Delta rises with L (the L trend reverses, docs/conventions.md);
+* under independent pixel noise: Delta rises with L (the L trend reverses,
+docs/reference/conventions.md);
 
 for both solver variants, on the mean and the p95 of the true rotation angle; and that nothing
 changed since the previous nightly run (:mod:`montecarlo.output.compare`: with the same study
