@@ -34,7 +34,7 @@ test-browser: install
 	$(BIN)/python -c 'import playwright.sync_api' 2>/dev/null \
 		|| $(BIN)/python -m pip install --quiet -e '.[browser]'
 	CHROMIUM=$(CHROMIUM) MONTECARLO_BROWSER_OUT=$(BROWSER_OUT) \
-		$(BIN)/pytest -m slow -n 0 -p no:cacheprovider -q -rs -s tests/test_browser.py
+		$(BIN)/pytest -m slow -n 0 -p no:cacheprovider -q -rs tests/test_browser.py
 
 nightly: install
 	$(BIN)/montecarlo nightly

@@ -61,6 +61,7 @@ _LAYOUT_JS = """() => {
     pre_before_first_heading: before(pre, h2),
     figures: figures,
     stray_media: document.querySelectorAll('body > svg, body > img, p img, li img').length,
+    page_width: document.documentElement.scrollWidth,
     page_height: document.documentElement.scrollHeight,
   };
 }"""
@@ -84,8 +85,8 @@ class PageCheck:
         status = "ok" if not self.problems else "FAILED: " + "; ".join(self.problems)
         return (f"{self.path.parent.name}/{self.path.name}: {len(figs)} figures [{sizes}] px, "
                 f"first section '{first}', {len(self.console_errors)} console errors, "
-                f"{len(self.requests_out)} requests out, page {self.layout.get('page_height')} px"
-                f" high -> {status}")
+                f"{len(self.requests_out)} requests out, page {self.layout.get('page_width')}×"
+                f"{self.layout.get('page_height')} px -> {status}")
 
 
 def chromium_path() -> str | None:

@@ -66,8 +66,15 @@ def _fresh(path: Path) -> Path:
     return path
 
 
+def _show(capsys, check) -> None:
+    """The check's one-line summary and screenshot on the terminal (the run's output not)."""
+    capsys.readouterr()
+    with capsys.disabled():
+        print(f"\n{check.summary()}\n  screenshot: {check.screenshot}")
+
+
 @pytest.mark.parametrize("study", STUDIES, ids=[s.stem for s in STUDIES])
-def test_study_report_in_chromium(study, out_root, browser):
+def test_study_report_in_chromium(study, out_root, browser, capsys):
     out = _fresh(out_root / study.stem)
     code = main(["run", str(study), "--trials", TRIALS.get(study.stem, "256"), "-q",
                  "--n-jobs", "1", "--out", str(out)])
@@ -75,21 +82,21 @@ def test_study_report_in_chromium(study, out_root, browser):
     has_spec = "spec" in tomllib.loads(study.read_text())
     check = check_report(browser, out / "report.html", "section" if has_spec else "none",
                          out / SCREENSHOT)
-    print(check.summary())
+    _show(capsys, check)
     assert check.problems == []
     figures = check.layout["figures"]
     assert len(figures) == len(list((out / "plots").iterdir()))
     assert (out / SCREENSHOT).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_diagnose_report_in_chromium(out_root, browser):
+def test_diagnose_report_in_chromium(out_root, browser, capsys):
     out = _fresh(out_root / "diagnose_ground")
     code = main(["diagnose", "ground", str(GROUND), "--fov-deg", "90", "90", "--pixels", "512",
                  "512", "--pixel-sigma-px", "0.3", "--survey-sigma-m", "0.01", "--trials", "20",
                  "--report", str(out), "-q"])
     assert code == 0
     check = check_report(browser, out / "report.html", "text", out / SCREENSHOT)
-    print(check.summary())
+    _show(capsys, check)
     assert check.problems == []
     assert [f["id"] for f in check.layout["figures"]] == ["residuals", "gap"]
 
