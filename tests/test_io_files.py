@@ -347,6 +347,8 @@ def test_figure_bytes_are_savefigs_drawn_once():
     reference.draw = lambda renderer: (draws.append(renderer), draw_reference(renderer))
     reference.savefig(io.BytesIO(), format="png")
     assert len(draws) == 2
+    with pytest.raises(ValueError, match="not supported"):  # savefig's own refusal
+        files.figure_bytes(fig, "xyz")
 
 
 def test_figures_render_to_the_same_bytes(tmp_path):

@@ -384,8 +384,8 @@ def figure_bytes(fig: Any, fmt: str = "png", dpi: int | None = 110,
     import matplotlib
 
     buf = io.BytesIO()
-    with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT, **(rc or {})}), \
-            _laid_out(fig, fmt, dpi):
+    params: Any = {"svg.hashsalt": SVG_HASHSALT, **(rc or {})}
+    with matplotlib.rc_context(params), _laid_out(fig, fmt, dpi):
         fig.savefig(buf, format=fmt, dpi=dpi, metadata=FIXED_METADATA.get(fmt) or None)
     return buf.getvalue()
 
@@ -401,14 +401,14 @@ def _laid_out(fig: Any, fmt: str, dpi: int | None) -> Any:
     import matplotlib
     from matplotlib.backend_bases import get_registered_canvas_class
 
-    engine = fig.get_layout_engine()
-    if engine is None:
-        yield
+    engine, canvas, figure_dpi = fig.get_layout_engine(), fig.canvas, fig.dpi
+    target = None if hasattr(canvas, f"print_{fmt}") else get_registered_canvas_class(fmt)
+    if engine is None or (target is None and not hasattr(canvas, f"print_{fmt}")):
+        yield  # nothing to lay out, or a format savefig will refuse itself
         return
-    canvas, figure_dpi = fig.canvas, fig.dpi
     try:
-        if not hasattr(canvas, f"print_{fmt}"):
-            get_registered_canvas_class(fmt)(fig)  # the new canvas sets itself on the figure
+        if target is not None:
+            target(fig)  # the new canvas sets itself on the figure
         fig.dpi = getattr(fig.canvas, "fixed_dpi", None) or dpi or figure_dpi
         engine.execute(fig)
         fig.dpi = figure_dpi
