@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-all acceptance lint nightly bench bench-full mutation clean
+.PHONY: install run test test-all test-browser acceptance lint nightly bench bench-full mutation clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -49,6 +49,18 @@ acceptance-%: install
 	nice -n 5 $(BIN)/pytest -q -p no:cacheprovider -m slow -n 0 \
 	$(firstword $(wildcard tests/test_$*.py tests/independent/test_$*.py)) \
 	> $(ACCEPTANCE_DIR)/$*.log 2>&1 || (tail -5 $(ACCEPTANCE_DIR)/$*.log; exit 1)
+
+# every shipped study's report.html and a diagnosis report in headless Chromium (Debian's
+# chromium driven by Playwright; both installed here if missing): docs/validation/browser.md
+CHROMIUM ?= /usr/bin/chromium
+BROWSER_OUT ?= results/browser
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+test-browser: install
+	test -x $(CHROMIUM) || { $(SUDO) apt-get update && $(SUDO) apt-get install -y chromium; }
+	$(BIN)/python -c 'import playwright.sync_api' 2>/dev/null \
+		|| $(BIN)/python -m pip install --quiet -e '.[browser]'
+	CHROMIUM=$(CHROMIUM) MONTECARLO_BROWSER_OUT=$(BROWSER_OUT) \
+		$(BIN)/pytest -m slow -n 0 -p no:cacheprovider -q -rs tests/test_browser.py
 
 nightly: install
 	$(BIN)/montecarlo nightly

@@ -307,6 +307,58 @@ def test_writable_file_refusals_in_full(tmp_path, monkeypatch):
     assert files.writable_file(tmp_path / "new.txt") == tmp_path / "new.txt"
 
 
+def _laid_out_figure():
+    """A figure whose layout matters: constrained layout, shared axes, a colorbar, titles, a
+    legend and a rasterised mesh, as the study plots have."""
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4, 2.5), layout="constrained")
+    left, right = fig.subplots(1, 2, sharey=True)
+    left.plot(np.arange(5.0), np.arange(5.0) ** 2, "-o", ms=3, label="square")
+    left.set_title("a title that takes room", fontsize=8)
+    left.legend(fontsize=6)
+    mesh = right.pcolormesh(np.arange(12.0).reshape(3, 4), rasterized=True)
+    fig.colorbar(mesh, ax=right, label="value [mrad]")
+    fig.suptitle("two panels\nover two lines")
+    return fig
+
+
+def test_figure_bytes_are_savefigs_drawn_once():
+    """figure_bytes gives matplotlib's own savefig bytes, png then svg then pdf from one figure
+    as a report draws them (each layout starting where the previous one ended), drawing the
+    figure once per format where savefig draws it twice; the figure is left as it was."""
+    import io
+
+    import matplotlib
+
+    reference = _laid_out_figure()
+    expected = []
+    for fmt, dpi, salt in (("png", 110, "x"), ("svg", None, "y"), ("pdf", 90, "x")):
+        buf = io.BytesIO()
+        with matplotlib.rc_context({"svg.hashsalt": salt, "svg.fonttype": "none"}):
+            reference.savefig(buf, format=fmt, dpi=dpi, metadata=files.FIXED_METADATA[fmt] or None)
+        expected.append(buf.getvalue())
+    fig = _laid_out_figure()
+    engine, canvas, dpi = fig.get_layout_engine(), fig.canvas, fig.dpi
+    draws = []
+    draw = fig.draw
+    fig.draw = lambda renderer: (draws.append(renderer), draw(renderer))
+    got = [files.figure_bytes(fig, "png", 110, rc={"svg.hashsalt": "x"}),
+           files.figure_bytes(fig, "svg", None, rc={"svg.hashsalt": "y", "svg.fonttype": "none"}),
+           files.figure_bytes(fig, "pdf", 90, rc={"svg.hashsalt": "x"})]
+    assert [g == e for g, e in zip(got, expected, strict=True)] == [True, True, True]
+    assert len(draws) == 3  # savefig itself: 6 (a pass with drawing disabled before each)
+    assert (fig.get_layout_engine(), fig.canvas, fig.dpi) == (engine, canvas, dpi)
+    draws.clear()
+    draw_reference = reference.draw
+    reference.draw = lambda renderer: (draws.append(renderer), draw_reference(renderer))
+    reference.savefig(io.BytesIO(), format="png")
+    assert len(draws) == 2
+    with pytest.raises(ValueError, match="not supported"):  # savefig's own refusal
+        files.figure_bytes(fig, "xyz")
+
+
 def test_figures_render_to_the_same_bytes(tmp_path):
     import matplotlib
 

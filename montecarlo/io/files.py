@@ -414,17 +414,57 @@ SVG_HASHSALT = "montecarlo"
 with it (random otherwise)."""
 
 
-def figure_bytes(fig: Any, fmt: str = "png", dpi: int = 110) -> bytes:
+def figure_bytes(fig: Any, fmt: str = "png", dpi: int | None = 110,
+                 rc: dict[str, Any] | None = None) -> bytes:
     """A matplotlib figure rendered as ``fmt`` (png, svg, pdf), the same bytes every time: no
-    creation date, fixed SVG ids."""
+    creation date, fixed SVG ids (``rc``: further rcParams for this render; ``dpi`` None: the
+    figure's own).
+
+    The bytes are those of ``fig.savefig``, drawn once: the figure's layout engine is run for
+    this format as ``savefig`` runs it (:func:`_laid_out`), then switched off while saving,
+    where ``savefig`` alone would first walk the whole figure with drawing disabled only to
+    run the layout."""
     import io
 
     import matplotlib
 
     buf = io.BytesIO()
-    with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
+    params: Any = {"svg.hashsalt": SVG_HASHSALT, **(rc or {})}
+    with matplotlib.rc_context(params), _laid_out(fig, fmt, dpi):
         fig.savefig(buf, format=fmt, dpi=dpi, metadata=FIXED_METADATA.get(fmt) or None)
     return buf.getvalue()
+
+
+@contextlib.contextmanager
+def _laid_out(fig: Any, fmt: str, dpi: int | None) -> Any:
+    """Within: ``fig`` laid out for ``fmt`` at ``dpi``, on the canvas that saves ``fmt``, with
+    no layout engine (so ``savefig`` draws it once); afterwards as it was.
+
+    As in ``savefig``: the canvas of the format (unless the figure's own can print it), and
+    the figure's dpi the format's fixed one (72 for svg and pdf) or the saving dpi while the
+    layout is computed."""
+    import matplotlib
+    from matplotlib.backend_bases import get_registered_canvas_class
+
+    engine, canvas, figure_dpi = fig.get_layout_engine(), fig.canvas, fig.dpi
+    target = None if hasattr(canvas, f"print_{fmt}") else get_registered_canvas_class(fmt)
+    if engine is None or (target is None and not hasattr(canvas, f"print_{fmt}")):
+        yield  # nothing to lay out, or a format savefig will refuse itself
+        return
+    try:
+        if target is not None:
+            target(fig)  # the new canvas sets itself on the figure
+        fig.dpi = getattr(fig.canvas, "fixed_dpi", None) or dpi or figure_dpi
+        engine.execute(fig)
+        fig.dpi = figure_dpi
+        with matplotlib.rc_context({"figure.autolayout": False,
+                                    "figure.constrained_layout.use": False}):
+            fig.set_layout_engine(None)  # none at all: a placeholder engine draws twice too
+        yield
+    finally:
+        fig.set_layout_engine(engine)
+        fig.dpi = figure_dpi
+        fig.set_canvas(canvas)
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:

@@ -20,7 +20,6 @@ figure is an error, never a link).
 from __future__ import annotations
 
 import html
-import io
 import json
 import re
 from collections.abc import Callable, Mapping, Sequence
@@ -34,6 +33,7 @@ from montecarlo.io.files import (
     PROVENANCE,
     RECORD_KEY,
     atomic_write_bytes,
+    figure_bytes,
 )
 
 HTML_NAME = "report.html"
@@ -84,14 +84,9 @@ def inline_svg(text: str) -> str:
 def figure_svg(fig: Any) -> str:
     """A matplotlib figure as deterministic inline SVG text, every artist as vectors (a
     colorbar's rasterised gradient would otherwise be a PNG inside the SVG)."""
-    import matplotlib
-
     for artist in fig.findobj(lambda a: a.get_rasterized()):
         artist.set_rasterized(False)
-    buf = io.StringIO()
-    with matplotlib.rc_context(SVG_RC):
-        fig.savefig(buf, format="svg", metadata={"Date": None})
-    return inline_svg(buf.getvalue())
+    return inline_svg(figure_bytes(fig, "svg", dpi=None, rc=SVG_RC).decode("utf-8"))
 
 
 def drawn_svg(draw: Callable[[Path], Any], name: str = "figure.svg") -> str:
