@@ -514,17 +514,17 @@ def test_no_good_mirror_flagged_with_an_unrecorded_1_degree_roll(sim, side, sens
     assert c["clean"] >= 0.95 * 300
 
 
-def test_a_data_set_once_adapted_to_a_singular_model_names_the_roll():
-    """A data set of an earlier second simulator (left, ccw, rolls at 2 x MDB) on which, when the
-    roll came after another effect, the model adapted with ``ins_roll`` had a singular normal
-    matrix (the diagnosis then went on without it). In the detection family the roll's own
-    test wins the first step: it is named, adapted without trouble, and the final model
-    passes."""
+def test_a_winner_whose_adapted_model_is_singular_is_not_adapted():
+    """A data set of an earlier second simulator (left, ccw, rolls at 2 x MDB) on which the
+    model adapted with ``ins_roll`` is singular in double precision (its column-normalised
+    design has a condition of 1.3e8, its normal matrix 1.7e16): the diagnosis goes on without
+    it, reports it as dropped (p = NaN) and the misfit as unexplained. Whether LAPACK finds
+    that normal matrix singular depends on its build; the fit's condition check does not."""
     from pathlib import Path
 
     data = read_mirror_csv(Path(__file__).parent / "data" / "collimation_ins_roll_singular.csv",
                            sets=SETS + REFERENCE_SETS)
     turned, s, _ = pe.choose_conventions(data, SIGMA)
     d = diagnose(pe.procedure_problem(turned, SIGMA, s))
-    assert d.named == ["ins_roll"] and d.dropped == {} and d.outliers == []
-    assert d.steps[0].winner == "ins_roll" and not d.unexplained
+    assert "ins_roll" in d.dropped and math.isnan(d.dropped["ins_roll"])
+    assert "ins_roll" not in d.named and d.unexplained

@@ -313,7 +313,8 @@ def test_absolute_readings_give_the_previous_results(tmp_path):
     stderr = {"frame_heading": 3.269667570794533, "axis_az": 2.669262632353943,
               "axis_el": 0.8307763367844244}
     for k in expected:
-        assert r["parameters"][k] == pytest.approx(expected[k], rel=1e-12, abs=1e-9)
+        # 1e-6 arcsec: the round-off of the iterative fit, which moves with the LAPACK build
+        assert r["parameters"][k] == pytest.approx(expected[k], rel=0, abs=1e-6)
         assert r["stderr"][k] == pytest.approx(stderr[k], rel=1e-9)
     assert r["rms_arcsec"]["after"]["all"] == pytest.approx(2.4222814748130665, rel=1e-9)
     assert r["rms_arcsec"]["before"]["all"] == pytest.approx(107.65476732647608, rel=1e-9)
