@@ -638,8 +638,7 @@ ACCEPTANCE_CASES = {
                              ("relative", "level", "right"),
                              ("relative", "free", "left"))
 }
-"""Acceptance cases: name -> (layout, reference rows?, roll, side)
-(docs/reference/collimation.md)."""
+"""Acceptance cases: name -> (layout, reference rows?, roll, side) (reference/collimation.md)."""
 
 
 def acceptance_case(name: str, n: int, seed: int) -> dict[str, FloatArray]:
