@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import re
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import montecarlo
 from montecarlo.output.html_report import (
     HtmlFigure,
     external_references,
-    figure_svg,
+    figure_markup,
     inline_svg,
     markdown_html,
     parse_errors,
@@ -88,19 +89,29 @@ def test_inline_svg_drops_what_points_outside():
     assert external_references(out) == []
 
 
-def test_a_colorbar_stays_vector_and_the_bytes_repeat():
-    """matplotlib rasterises a colorbar of many colours into a PNG inside the SVG; the report's
-    SVG has none, and the same figure gives the same text twice."""
-    import numpy as np
+def test_a_png_figure_is_held_as_drawn_at_its_pixel_size(tmp_path):
+    """The figure's HTML holds the PNG's own bytes, at the size matplotlib's PNG reader gives;
+    what is not a PNG or an SVG is refused."""
+    import base64
+
+    import matplotlib.image
     from matplotlib.figure import Figure
 
-    fig = Figure()
-    ax = fig.subplots()
-    mesh = ax.pcolormesh(np.arange(12.0).reshape(3, 4))
-    fig.colorbar(mesh, ax=ax)
-    svg = figure_svg(fig)
-    assert "<image" not in svg and external_references(svg) == []
-    assert figure_svg(fig) == svg
+    fig = Figure(figsize=(3, 2))
+    fig.subplots().plot([0, 1], [1, 0])
+    fig.savefig(tmp_path / "f.png", dpi=50)
+    data = (tmp_path / "f.png").read_bytes()
+    markup = figure_markup(data, "png", "f")
+    src = re.fullmatch(r'<img src="data:image/png;base64,([^"]+)" width="(\d+)" '
+                       r'height="(\d+)" alt="f">', markup)
+    assert src is not None and base64.b64decode(src.group(1)) == data
+    rows, cols = matplotlib.image.imread(tmp_path / "f.png").shape[:2]
+    assert (int(src.group(2)), int(src.group(3))) == (cols, rows) == (150, 100)
+    assert external_references(markup) == []
+    with pytest.raises(ValueError, match="not a PNG"):
+        figure_markup(b"%PDF-1.4", "pdf", "f")
+    with pytest.raises(ValueError, match="not a PNG"):
+        figure_markup(b"GIF89a", "png", "f")
 
 
 def test_checks_find_what_they_look_for():
@@ -129,7 +140,10 @@ def test_run_writes_a_self_contained_report_that_rerenders_identically(tmp_path)
     assert heads[:3] == ["Spec", "Provenance", "Assumptions"]
     assert "Nominal case" in heads
     captions = re.findall(r"<figcaption>(.*?)</figcaption>", text, re.S)
-    assert len(captions) == text.count("<svg") == len(list((out / "plots").iterdir())) >= 2
+    plots = sorted((out / "plots").iterdir())
+    assert len(captions) == text.count("<img") == len(plots) >= 2
+    for plot in plots:  # each figure drawn once: the report holds the plot file's bytes
+        assert base64.b64encode(plot.read_bytes()).decode() in text
     for c in captions:
         assert "<code>rotation_angle</code>" in c and "[mrad]" in c
         assert "Pixel relation between targets A and B: independent" in c

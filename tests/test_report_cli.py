@@ -53,6 +53,14 @@ def test_report_in_other_formats_replaces_the_plots(saved, tmp_path, fmt, magic)
                          for p in plots)
     assert f"(plots/histograms.{fmt})" in (copy / "report.md").read_text()
     assert not [p for p in copy.iterdir() if p.name.startswith(".")]
+    page = (copy / "report.html").read_text()
+    # SVG plots are the report's figures as vectors; a PDF's are PNGs drawn beside it
+    assert page.count("<svg" if fmt == "svg" else "<img") == len(plots)
+    assert page.count("<img" if fmt == "svg" else "<svg") == 0
+    if fmt == "svg":
+        from montecarlo.output.html_report import inline_svg
+
+        assert all(inline_svg(p.read_text()) in page for p in plots)  # the files' drawing
 
 
 def test_run_writes_the_format_asked(tmp_path):

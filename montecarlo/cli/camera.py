@@ -84,7 +84,7 @@ def _image_figures(staging: Path, det: Detected, d: Diagnosis,
     report.html."""
     from montecarlo.camera_calibration.detect import view_label
     from montecarlo.output import camera_images as ci
-    from montecarlo.output.html_report import HtmlFigure, drawn_svg
+    from montecarlo.output.html_report import saved_figure
 
     write_detected(staging, det)
     images = {view_label(x.path): x.path for x in det.found}
@@ -96,9 +96,7 @@ def _image_figures(staging: Path, det: Detected, d: Diagnosis,
         name = f"image_residuals_{k + 1}.png"
         page = f" ({k + 1}/{len(pages)})" if len(pages) > 1 else ""
         ci.plot_image_residuals(d, det.data, images, views, staging / name, page)
-        figures[name] = HtmlFigure(drawn_svg(lambda p, v=views, t=page: ci.plot_image_residuals(
-            d, det.data, images, v, p, t), name.replace(".png", ".svg")),
-            ci.image_residual_caption(", ".join(views)))
+        figures[name] = saved_figure(staging / name, ci.image_residual_caption(", ".join(views)))
         md += [f"![residuals on the images{page}]({name})", ""]
     return figures
 

@@ -151,8 +151,8 @@ def write_budget(results: Sequence[BudgetResult], out_dir: Path) -> list[Path]:
 
 def write_html_report(results: Sequence[BudgetResult], out_dir: Path) -> Path:
     """``report.html`` beside ``report.md``: a verdict table first, the budget plot inline as
-    SVG with its caption."""
-    from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
+    with its caption (the PNG :func:`write_budget` saved in ``out_dir``)."""
+    from montecarlo.output.html_report import saved_figure, write_html
 
     req = results[0].requirement
     unit = results[0].unit
@@ -174,5 +174,5 @@ def write_html_report(results: Sequence[BudgetResult], out_dir: Path) -> Path:
                f"that the source produces alone, with its {req.confidence:.0%} order-statistic "
                f"interval. Pixel relation between targets A and B: {relations} (one column "
                "each).")
-    return write_html(out_dir, {"budget.png": HtmlFigure(figure_svg(budget_figure(results)),
-                                                         caption)}, "Error budget", md)
+    return write_html(out_dir, {"budget.png": saved_figure(out_dir / "budget.png", caption)},
+                      "Error budget", md)

@@ -252,8 +252,9 @@ def write_outputs(result: SizingResult, out_dir: Path) -> list[Path]:
 
 
 def write_html_report(result: SizingResult, out_dir: Path) -> Path:
-    """``report.html`` beside ``report.md``, the frontier plot inline as SVG with its caption."""
-    from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
+    """``report.html`` beside ``report.md``, the frontier plot inline with its caption (the PNG
+    :func:`write_outputs` saved in ``out_dir``)."""
+    from montecarlo.output.html_report import saved_figure, write_html
 
     req = result.problem.requirement
     relations = ", ".join(result.relations)
@@ -263,5 +264,5 @@ def write_html_report(result: SizingResult, out_dir: Path) -> Path:
                "a slice through the answer, with the boundary of 'meets'; bottom, the "
                "Pareto-minimal corners, each knob's position in its bounds (log, unitless). "
                f"Pixel relation between targets A and B: {relations} (one column each).")
-    return write_html(out_dir, {"frontier.png": HtmlFigure(figure_svg(frontier_figure(result)),
-                                                           caption)}, "Sizing")
+    return write_html(out_dir, {"frontier.png": saved_figure(out_dir / "frontier.png", caption)},
+                      "Sizing")

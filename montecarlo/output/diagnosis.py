@@ -177,21 +177,23 @@ def write_html_report(outdir: str | Path, d: Diagnosis, view: SystemView,
                       mc: Mapping[str, FloatArray] | None = None,
                       extra: Mapping[str, Any] | None = None) -> Path:
     """``report.html`` beside ``report.md`` (:mod:`montecarlo.output.html_report`): the residual
-    and gap plots (``mc`` as for :func:`write_report`) inline as SVG, with captions, and the
-    ``extra`` figures (file name in report.md -> ``HtmlFigure``) that report.md shows."""
-    from montecarlo.output.html_report import HtmlFigure, drawn_svg, write_html
+    and gap plots :func:`write_report` saved in ``outdir`` (``mc`` as given to it), with
+    captions, and the ``extra`` figures (file name in report.md -> ``HtmlFigure``) that
+    report.md shows."""
+    from montecarlo.output.html_report import saved_figure, write_html
 
+    outdir = Path(outdir)
     pixel = ("Pixel relation: not modelled here (measured data, one residual per "
              "observation).")
     unit = view.rms_unit
     figures = {
-        "residuals.png": HtmlFigure(
-            drawn_svg(lambda p: plot_residuals(d, view, p), "residuals.svg"),
+        "residuals.png": saved_figure(
+            outdir / "residuals.png",
             f"Residuals (measured − model) of every {view.system} observation [{unit}] against "
             f"each of its axes, base model (top) and adapted model (bottom); statistic: each "
             f"observation's own residual, no aggregate. {pixel}"),
-        "gap.png": HtmlFigure(
-            drawn_svg(lambda p: plot_gap(d, view, mc, p), "gap.svg"),
+        "gap.png": saved_figure(
+            outdir / "gap.png",
             f"The gap before and after adaptation: reduced chi-square χ²_red (unitless, log "
             f"scale) with its 99 % band, and the residual RMS [{unit}]"
             + ("; the Monte Carlo distribution of χ²_red beside the measured value"

@@ -2,14 +2,14 @@
 
 Written beside ``report.md`` by ``run``, ``report DIR``, ``diagnose --report``, ``size`` and
 ``budget``. It holds the provenance, the verdict table first, the rest of the report and every
-plot inline as SVG with a caption stating the metric, the statistic, the unit and the pixel
+plot inline with a caption stating the metric, the statistic, the unit and the pixel
 relation. It references nothing outside itself (no network, no file, no script, no
 stylesheet link), so it opens anywhere and reads without JavaScript.
 
-The same inputs give the same bytes: SVG ids come from a fixed hash salt
-(``svg.hashsalt``), the SVG carries no date (``metadata={'Date': None}``, and its metadata
-block is dropped), text is kept as text (``svg.fonttype = 'none'``), and the provenance shown is
-the saved ``provenance.json``.
+Each figure is drawn once: the report holds the bytes of the plot file written beside it, a
+PNG as a ``data:`` image, an SVG (``--format svg``) inline as vectors. The same inputs give the
+same bytes: the plot files do (:func:`montecarlo.io.files.figure_bytes`), and the provenance
+shown is the saved ``provenance.json``.
 
 The body is converted from the report's Markdown by :func:`markdown_html`, which knows the
 subset our reports use: headings, paragraphs, ``-`` lists, pipe tables, fenced code, inline
@@ -19,10 +19,11 @@ figure is an error, never a link).
 
 from __future__ import annotations
 
+import base64
 import html
 import json
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,12 +34,9 @@ from montecarlo.io.files import (
     PROVENANCE,
     RECORD_KEY,
     atomic_write_bytes,
-    figure_bytes,
 )
 
 HTML_NAME = "report.html"
-SVG_RC = {"svg.hashsalt": "montecarlo-report", "svg.fonttype": "none"}
-"""Matplotlib settings under which figures are rendered for the report (deterministic ids)."""
 
 PROVENANCE_FIELDS = ("kind", "study", "study_hash", "seed", "package_version", "git_commit",
                      "code_fingerprint", "kernel", "created_utc", "command", "platform", "cpu")
@@ -52,7 +50,7 @@ th,td{border:1px solid #bbb;padding:.15rem .45rem;text-align:right}
 th{background:#eee}td:first-child,th:first-child{text-align:left}
 code,pre{font-family:ui-monospace,monospace;font-size:.85rem}
 pre{background:#f6f6f6;padding:.6rem;overflow-x:auto}
-figure{margin:1rem 0}figure svg{max-width:100%;height:auto}
+figure{margin:1rem 0}figure svg,figure img{max-width:100%;height:auto}
 figcaption{font-size:.85rem;color:#333;max-width:60rem}
 .meets{background:#d9f2d9}.fails{background:#f7d4d4}.undecided{background:#fdf1c7}
 table.provenance td{text-align:left}
@@ -61,15 +59,17 @@ table.provenance td{text-align:left}
 
 @dataclass(frozen=True)
 class HtmlFigure:
-    """A figure of the report: its SVG text and its caption (plain text)."""
+    """A figure of the report: its HTML (an inline ``<svg>`` or a ``data:`` PNG ``<img>``)
+    and its caption (plain text)."""
 
-    svg: str
+    markup: str
     caption: str
 
 
 _STRIP = [re.compile(p, re.S) for p in (r"<\?xml.*?\?>\s*", r"<!DOCTYPE.*?>\s*",
                                            r"<metadata>.*?</metadata>\s*")]
 _XMLNS = re.compile(r'\s+xmlns(:xlink)?="[^"]*"')
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def inline_svg(text: str) -> str:
@@ -81,24 +81,22 @@ def inline_svg(text: str) -> str:
     return _XMLNS.sub("", head) + sep + rest
 
 
-def figure_svg(fig: Any) -> str:
-    """A matplotlib figure as deterministic inline SVG text, every artist as vectors (a
-    colorbar's rasterised gradient would otherwise be a PNG inside the SVG)."""
-    for artist in fig.findobj(lambda a: a.get_rasterized()):
-        artist.set_rasterized(False)
-    return inline_svg(figure_bytes(fig, "svg", dpi=None, rc=SVG_RC).decode("utf-8"))
+def figure_markup(data: bytes, fmt: str, alt: str) -> str:
+    """The HTML of a rendered figure: ``data`` (the bytes of a ``png`` or ``svg`` file) as an
+    ``<img>`` holding the PNG itself, at its pixel size, or as inline SVG."""
+    if fmt == "svg":
+        return inline_svg(data.decode("utf-8"))
+    if fmt != "png" or not data.startswith(PNG_SIGNATURE):
+        raise ValueError(f"{alt}: not a PNG or SVG figure")
+    width, height = (int.from_bytes(data[k:k + 4], "big") for k in (16, 20))  # IHDR
+    return (f'<img src="data:image/png;base64,{base64.b64encode(data).decode("ascii")}" '
+            f'width="{width}" height="{height}" alt="{html.escape(alt)}">')
 
 
-def drawn_svg(draw: Callable[[Path], Any], name: str = "figure.svg") -> str:
-    """Deterministic inline SVG of a figure that a function saves to a path it is given."""
-    import tempfile
-
-    import matplotlib
-
-    with tempfile.TemporaryDirectory() as tmp, matplotlib.rc_context(SVG_RC):
-        path = Path(tmp) / name
-        draw(path)
-        return inline_svg(path.read_text(encoding="utf-8"))
+def saved_figure(path: Path, caption: str) -> HtmlFigure:
+    """The figure a PNG or SVG file holds, as drawn (nothing is drawn again)."""
+    return HtmlFigure(figure_markup(path.read_bytes(), path.suffix.lstrip("."), path.stem),
+                      caption)
 
 
 _CODE = re.compile(r"`([^`]+)`")
@@ -182,7 +180,7 @@ def markdown_html(md: str, figures: Mapping[str, HtmlFigure]) -> str:
             flush()
             name = Path(m.group(2)).name
             fig = figures[name]
-            out.append(f'<figure id="{html.escape(Path(name).stem)}">\n{fig.svg}\n'
+            out.append(f'<figure id="{html.escape(Path(name).stem)}">\n{fig.markup}\n'
                        f"<figcaption>{inline(fig.caption)}</figcaption>\n</figure>")
         elif stripped.startswith("|"):
             flush()
@@ -276,15 +274,17 @@ def write_html(out_dir: str | Path, figures: Mapping[str, HtmlFigure], title: st
 
 
 _EXTERNAL = [re.compile(p, re.I) for p in (
-    r"https?:", r"\bsrc\s*=", r"<link\b", r"<script\b", r"@import", r"url\(\s*['\"]?(?!#)",
+    r"https?:", r"\bsrc\s*=\s*(?!['\"]data:image/png;base64,)", r"<link\b", r"<script\b",
+    r"@import", r"url\(\s*['\"]?(?!#)",
     r"\bhref\s*=\s*['\"](?!#|data:image/png;base64,)", r"<iframe\b", r"<object\b",
     r"<embed\b")]
 
 
 def external_references(text: str) -> list[str]:
     """Whatever in an HTML text could reach outside it (empty for a self-contained report):
-    URLs, ``src``, stylesheet links, scripts, imports and ``href``s that are neither ``#ids``
-    nor a PNG held in the text itself (a photograph under a figure's vectors)."""
+    URLs, stylesheet links, scripts, imports, and ``src``s and ``href``s that are neither
+    ``#ids`` nor a PNG held in the text itself (a figure, or a photograph under a figure's
+    vectors)."""
     return [m.group(0) for p in _EXTERNAL for m in p.finditer(text)]
 
 

@@ -23,12 +23,12 @@ from montecarlo.io.files import (
     PROVENANCE,
     OutputLock,
     atomic_write_bytes,
-    save_figure,
+    figure_bytes,
     update_written_files,
     with_umask,
 )
 from montecarlo.output.captions import figure_caption
-from montecarlo.output.html_report import HtmlFigure, figure_svg, write_html
+from montecarlo.output.html_report import HtmlFigure, figure_markup, write_html
 from montecarlo.output.plots import all_figures
 from montecarlo.output.provenance import study_provenance
 from montecarlo.output.report import render_report
@@ -78,14 +78,19 @@ def _draw(result: StudyResult, summary: pd.DataFrame, plots: Path, fmt: str
           ) -> tuple[list[str], dict[str, HtmlFigure]]:
     """Save every figure into ``plots`` as ``fmt`` (the same bytes on every render, see
     :func:`montecarlo.io.files.figure_bytes`); returns the file names and the figures for
-    report.html (inline SVG with captions), by file name."""
+    report.html with captions, by file name: the saved bytes themselves (drawn once), or for a
+    PDF plot a PNG drawn beside it."""
     import matplotlib.pyplot as plt
 
     names, figures = [], {}
     for name, fig in all_figures(result, summary):
         name = f"{Path(name).stem}.{fmt}"
-        save_figure(fig, plots / name, dpi=110)
-        figures[name] = HtmlFigure(figure_svg(fig), figure_caption(result, name))
+        data = figure_bytes(fig, fmt, dpi=110)
+        atomic_write_bytes(plots / name, data)
+        shown, shown_fmt = (data, fmt) if fmt in ("png", "svg") else (
+            figure_bytes(fig, "png", dpi=110), "png")
+        figures[name] = HtmlFigure(figure_markup(shown, shown_fmt, Path(name).stem),
+                                   figure_caption(result, name))
         plt.close(fig)
         names.append(name)
     return names, figures
