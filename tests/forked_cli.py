@@ -1,31 +1,34 @@
 """A server that runs ``python -m montecarlo ARGS`` in forked children of one preloaded process.
 
-Used by ``tests/test_bad_inputs.py``: each case there is one short command-line run, most of
-which, as a fresh process, is spent importing the libraries. This server imports them once;
-each request then forks a child that runs the package's ``__main__`` exactly as ``python -m``
-does (``runpy``, ``sys.argv``, exit code from ``SystemExit``, an uncaught exception printed as a
-traceback with exit code 1), in its own working directory with its own stdin, stdout and stderr.
+Used by the tests of the command line (:func:`montecarlo_cli`, and ``tests/test_bad_inputs.py``):
+most of a short command-line run, as a fresh process, is spent importing the libraries. This
+server imports them once; each request then forks a child that runs the package's ``__main__``
+exactly as ``python -m`` does (``runpy``, ``sys.argv``, exit code from ``SystemExit``, an
+uncaught exception printed as a traceback with exit code 1), in its own working directory and
+environment with its own stdin, stdout and stderr: a process of its own, as a test of exit
+codes, output and files written needs.
 
 Protocol: one JSON object per line on stdin, ``{"argv": [...], "cwd": DIR, "stdout": FILE,
-"stderr": FILE, "timeout": SECONDS}``; one JSON line back per request, ``{"returncode": INT or
-null, "timed_out": BOOL}``. End of input ends the server.
+"stderr": FILE, "timeout": SECONDS, "env": {NAME: VALUE} or null}``; one JSON line back per
+request, ``{"returncode": INT or null, "timed_out": BOOL}``. End of input ends the server.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import runpy
 import signal
+import subprocess
 import sys
+import tempfile
 import time
 import traceback
+from pathlib import Path
+from typing import Any
 
-import pandas  # noqa: F401  (preloaded, like the package: what the children share)
-import scipy.stats  # noqa: F401
-
-import montecarlo.cli
-import montecarlo.engine.runner  # noqa: F401
+TIMEOUT = 600
 
 
 def _exit_code(exc: SystemExit) -> int:
@@ -42,6 +45,9 @@ def _child(request: dict) -> None:
     """In the forked child: become ``python -m montecarlo ARGV``; never returns."""
     code = 1
     try:
+        if request.get("env") is not None:
+            os.environ.clear()
+            os.environ.update(request["env"])
         os.chdir(request["cwd"])
         os.dup2(os.open(os.devnull, os.O_RDONLY), 0)
         for fd, key in ((1, "stdout"), (2, "stderr")):
@@ -80,11 +86,73 @@ def _run(request: dict) -> dict:
 
 def serve() -> None:
     """Answer requests on stdin until it closes."""
+    import pandas  # noqa: F401  (preloaded, like the package: what the children share)
+    import scipy.stats  # noqa: F401
+
+    import montecarlo.cli
+    import montecarlo.engine.runner  # noqa: F401
+
     replies = os.fdopen(os.dup(1), "w")
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # nothing of the server's own reaches replies
     for line in sys.stdin:
         replies.write(json.dumps(_run(json.loads(line))) + "\n")
         replies.flush()
+
+
+class ForkedCli:
+    """One server (this module run as a script): ``python -m montecarlo`` with its imports
+    done."""
+
+    def __init__(self) -> None:
+        # one BLAS thread: no BLAS thread pool in the server when it forks
+        env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1",
+               "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+        self.server = subprocess.Popen([sys.executable, __file__], stdin=subprocess.PIPE,
+                                       stdout=subprocess.PIPE, text=True, env=env)
+
+    def run(self, argv: list[str], cwd: Path, out: Path, err: Path, timeout: float = TIMEOUT,
+            env: dict[str, str] | None = None) -> dict[str, Any]:
+        """Run the command line in ``cwd`` (with the environment ``env``, else the server's),
+        its output into the files ``out`` and ``err``; returns its exit code and whether it
+        timed out."""
+        assert self.server.stdin is not None and self.server.stdout is not None
+        request = {"argv": argv, "cwd": str(cwd), "stdout": str(out), "stderr": str(err),
+                   "timeout": timeout, "env": env}
+        self.server.stdin.write(json.dumps(request) + "\n")
+        self.server.stdin.flush()
+        reply = self.server.stdout.readline()
+        assert reply, f"the command-line server stopped (exit {self.server.poll()})"
+        return json.loads(reply)
+
+    def close(self) -> None:
+        assert self.server.stdin is not None and self.server.stdout is not None
+        self.server.stdin.close()
+        self.server.wait(timeout=TIMEOUT)
+        self.server.stdout.close()
+
+
+_SHARED: list[ForkedCli] = []
+
+
+def montecarlo_cli(*args: Any, cwd: str | Path | None = None, timeout: float = TIMEOUT,
+                   env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """``subprocess.run([python, "-m", "montecarlo", *args], capture_output=True, text=True)``
+    in a child forked from this test process's server (started on first use), in ``cwd`` with
+    ``env`` (else this process's environment now): the same exit code, output and files,
+    without importing the libraries again. A run past ``timeout``
+    raises ``subprocess.TimeoutExpired`` as ``subprocess.run`` does."""
+    if not _SHARED:
+        _SHARED.append(ForkedCli())
+        atexit.register(_SHARED[0].close)
+    argv = [str(a) for a in args]
+    with tempfile.TemporaryDirectory(prefix="forked-cli-") as tmp:
+        out, err = Path(tmp) / "stdout", Path(tmp) / "stderr"
+        reply = _SHARED[0].run(argv, Path(cwd or os.getcwd()).resolve(), out, err, timeout,
+                               dict(os.environ) if env is None else env)
+        if reply["timed_out"]:
+            raise subprocess.TimeoutExpired(["montecarlo", *argv], timeout)
+        return subprocess.CompletedProcess(["montecarlo", *argv], reply["returncode"],
+                                           out.read_text(), err.read_text())
 
 
 if __name__ == "__main__":

@@ -1,15 +1,14 @@
 """`montecarlo air` and `montecarlo transfer-alignment`, run as subprocesses."""
 
 import json
-import subprocess
-import sys
 
 import pytest
 
+from tests.forked_cli import montecarlo_cli
+
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo", *args], capture_output=True,
-                          text=True, timeout=600)
+    return montecarlo_cli(*args)
 
 
 def test_air_json_reproduces_the_paper_within_2_percent():

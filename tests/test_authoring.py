@@ -1,8 +1,6 @@
 """Writing study files: ``validate``, ``schema``, ``init`` and ``list``, run as users run them."""
 
 import json
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -12,14 +10,14 @@ import pytest
 import montecarlo
 from montecarlo.engine.runner import available_cores
 from montecarlo.systems import REGISTRY
+from tests.forked_cli import montecarlo_cli
 
 ROOT = Path(__file__).parent.parent
 STUDIES = sorted((ROOT / "studies").glob("*.toml"))
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "montecarlo", *map(str, args)],
-                          capture_output=True, text=True, timeout=600, cwd=cwd)
+    return montecarlo_cli(*args, cwd=cwd)
 
 
 def test_validate_states_grid_trials_time_and_spec():

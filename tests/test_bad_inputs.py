@@ -32,20 +32,18 @@ with the observed behaviour as the reason, so that fixing the defect makes the s
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import shutil
 import stat
-import subprocess
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
+from tests.forked_cli import ForkedCli
+
 DATA = Path(__file__).parent / "data" / "bad_inputs"
-SERVER = Path(__file__).parent / "forked_cli.py"
 TIMEOUT = 60
 
 
@@ -761,41 +759,13 @@ class Outcome:
     timed_out: bool = False
 
 
-class ForkedCli:
-    """One ``tests/forked_cli.py`` server: ``python -m montecarlo`` with its imports done."""
-
-    def __init__(self) -> None:
-        # one BLAS thread: no BLAS thread pool in the server when it forks
-        env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1",
-               "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-        self.server = subprocess.Popen([sys.executable, str(SERVER)], stdin=subprocess.PIPE,
-                                       stdout=subprocess.PIPE, text=True, env=env)
-
-    def run(self, argv: list[str], cwd: Path, out: Path, err: Path) -> dict:
-        """Run the command line in ``cwd``; returns its exit code and whether it timed out."""
-        assert self.server.stdin is not None and self.server.stdout is not None
-        request = {"argv": argv, "cwd": str(cwd), "stdout": str(out), "stderr": str(err),
-                   "timeout": TIMEOUT}
-        self.server.stdin.write(json.dumps(request) + "\n")
-        self.server.stdin.flush()
-        reply = self.server.stdout.readline()
-        assert reply, f"the command-line server stopped (exit {self.server.poll()})"
-        return json.loads(reply)
-
-    def close(self) -> None:
-        assert self.server.stdin is not None and self.server.stdout is not None
-        self.server.stdin.close()
-        self.server.wait(timeout=TIMEOUT)
-        self.server.stdout.close()
-
-
 def run_case(case: Case, work: Path, cli: ForkedCli) -> Outcome:
     """Run one case in its own fresh working directory ``work`` (its output kept beside it)."""
     work.mkdir(parents=True)
     prepare(case, work)
     outcome = Outcome(work, snapshot(work))
     out, err = work.with_suffix(".stdout"), work.with_suffix(".stderr")
-    reply = cli.run([fill(a, work) for a in case.argv], work, out, err)
+    reply = cli.run([fill(a, work) for a in case.argv], work, out, err, TIMEOUT)
     outcome.returncode, outcome.timed_out = reply["returncode"], reply["timed_out"]
     outcome.stdout, outcome.stderr = out.read_text(), err.read_text()
     outcome.after = snapshot(work)

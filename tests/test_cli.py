@@ -1,15 +1,14 @@
 """The command line, run as a subprocess (as users and CI run it)."""
 
 import json
-import subprocess
-import sys
 
 import pytest
 
+from tests.forked_cli import montecarlo_cli
+
 
 def run_cli(*args, **kwargs):
-    return subprocess.run([sys.executable, "-m", "montecarlo", *args], capture_output=True,
-                          text=True, timeout=600, **kwargs)
+    return montecarlo_cli(*args, **kwargs)
 
 
 def test_table1_json():

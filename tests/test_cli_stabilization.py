@@ -1,10 +1,10 @@
 """`montecarlo stabilization simulate|estimate|observability`, run as a subprocess."""
 
 import json
-import subprocess
-import sys
 
 import pytest
+
+from tests.forked_cli import montecarlo_cli
 
 SHORT = ["--duration-s", "20", "--rate-hz", "50"]
 TRUTH_ARCMIN = {"delta_px": 24.0, "delta_gx": 30.0, "delta_gy": -18.0, "delta_z": -78.0,
@@ -12,8 +12,7 @@ TRUTH_ARCMIN = {"delta_px": 24.0, "delta_gx": 30.0, "delta_gy": -18.0, "delta_z"
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo", "stabilization", *args],
-                          capture_output=True, text=True, timeout=600)
+    return montecarlo_cli("stabilization", *args)
 
 
 @pytest.fixture(scope="module")

@@ -2,13 +2,12 @@
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from montecarlo.cli import main
+from tests.forked_cli import montecarlo_cli
 
 GOOD = """mirror,set,theodolite_az_deg,theodolite_el_deg,ins_az_deg,ins_el_deg
 A1,azimuth,0.0,0.0,30.0,-0.05
@@ -19,8 +18,7 @@ P2,pitch,0.0,60.0,29.95,59.95
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo", "collimation", *args],
-                          capture_output=True, text=True, timeout=600)
+    return montecarlo_cli("collimation", *args)
 
 
 def test_simulate_then_fit_recovers_the_injected_offsets(tmp_path):

@@ -4,7 +4,6 @@ independent samples are judged on their intervals, different studies are refused
 import json
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from montecarlo.output.compare import (
     simultaneous_z,
     verdict_counts,
 )
+from tests.forked_cli import montecarlo_cli
 
 STUDY = """
 [study]
@@ -69,14 +69,13 @@ def _run(tmp_path: Path, tag: str, trials: int = 2000, seed: int = 1, sigma: flo
     study = tmp_path / f"{tag}.toml"
     study.write_text(STUDY.format(trials=trials, seed=seed, sigma=sigma, name=name))
     out = tmp_path / tag
-    subprocess.run([sys.executable, "-m", "montecarlo", "-q", "run", str(study), "--out",
-                    str(out), "--n-jobs", "1"], check=True)
+    done = montecarlo_cli("-q", "run", study, "--out", out, "--n-jobs", "1")
+    assert done.returncode == 0, done.stderr
     return out
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "montecarlo", "compare", *args],
-                          capture_output=True, text=True)
+    return montecarlo_cli("compare", *args)
 
 
 @pytest.fixture(scope="module")

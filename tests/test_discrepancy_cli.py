@@ -1,14 +1,13 @@
 """``montecarlo synth`` and ``montecarlo diagnose`` run as subprocesses, as users run them."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from montecarlo.cli import main
+from tests.forked_cli import montecarlo_cli
 
 FIXED_KEYS = {"system", "detected", "named_effects", "confounded_groups", "absorbed", "gap",
               "rms_unit"}
@@ -17,8 +16,7 @@ GROUND = ["--fov-deg", "90", "90", "--pixels", "512", "512", "--pixel-sigma-px",
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo", *map(str, args)],
-                          capture_output=True, text=True, timeout=600)
+    return montecarlo_cli(*args)
 
 
 def test_ground_hidden_focal_scale_is_named_and_the_gap_shrinks(tmp_path):

@@ -5,11 +5,11 @@ import json
 import re
 import shlex
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.forked_cli import montecarlo_cli
 
 ROOT = Path(__file__).parent.parent
 PREFIX = ".venv/bin/montecarlo "
@@ -42,8 +42,7 @@ def workdir(tmp_path_factory):
 @pytest.mark.parametrize("command", readme_commands())
 def test_readme_command_runs_as_printed(workdir, command):
     args = shlex.split(command)[1:]
-    done = subprocess.run([sys.executable, "-m", "montecarlo", *args], cwd=workdir,
-                          capture_output=True, text=True, timeout=600)
+    done = montecarlo_cli(*args, cwd=workdir)
     assert done.returncode == 0, f"{command}\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
 
 

@@ -22,6 +22,7 @@ from montecarlo.engine.aggregate import MetricStats
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.io.files import OutputDir
 from montecarlo.systems import load_study
+from tests.forked_cli import montecarlo_cli
 
 GROUND = """
 [study]
@@ -57,8 +58,7 @@ def study_file(tmp_path, name="t", trials=2000, extra=""):
 
 
 def cli(*args, cwd=None, timeout=120):
-    return subprocess.run([sys.executable, "-m", "montecarlo", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
+    return montecarlo_cli(*args, cwd=cwd, timeout=timeout)
 
 
 def one_line_exit_2(proc):

@@ -4,18 +4,18 @@ in any of the plot formats, and refuses what it cannot rebuild."""
 import json
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.forked_cli import montecarlo_cli
 
 ROOT = Path(__file__).parent.parent
 TABLE1 = ROOT / "studies" / "table1.toml"
 
 
 def _mc(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "montecarlo", *args], capture_output=True,
-                          text=True, cwd=cwd)
+    return montecarlo_cli(*args, cwd=cwd)
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,6 @@ cheaper in the limiting parameter, which fails.
 """
 
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
@@ -19,6 +17,7 @@ from montecarlo.design import sizing as sz
 from montecarlo.design import sizing_problem as sp
 from montecarlo.design import sizing_report as sr
 from montecarlo.errors import InputError
+from tests.forked_cli import montecarlo_cli
 
 REQ = sp.Requirement(limit=3.0)
 
@@ -210,8 +209,7 @@ def test_confirm_seed_must_differ():
 # --- CLI -----------------------------------------------------------------------------------------
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "montecarlo", *args], capture_output=True,
-                          text=True, timeout=600)
+    return montecarlo_cli(*args)
 
 
 def test_cli_size_writes_the_answer(tmp_path):
