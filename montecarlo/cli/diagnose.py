@@ -123,6 +123,7 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
         from montecarlo.discrepancy import ground_effects as ge
         from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError
+        from montecarlo.discrepancy.noise_estimation import check_components
         from montecarlo.geometry.camera import Camera
         from montecarlo.io.ground_csv import read_ground_csv
 
@@ -148,6 +149,12 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
             else:
                 d = diagnose(ge.ground_problem(data, camera, sigma, survey,
                                                args.refraction_k), args.alpha)
+                extra = {"stated_noise": {"pixel sigma px": sigma, "survey sigma m": survey}}
+                if survey > 0:  # each stated value against the components the data give
+                    extra["noise_components"] = check_components(
+                        ["pixel_sigma_px", "survey_sigma_m"], ge.whitened_noise_components(
+                            data, camera, sigma, survey, args.refraction_k),
+                        {"pixel_sigma_px": sigma, "survey_sigma_m": survey}, d.after)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
@@ -185,6 +192,7 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
                 extra = {"noise_estimate": report_entry(used, found)}
             else:
                 d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
+                extra = {"stated_noise": {"angle sigma arcsec": args.angle_sigma_arcsec}}
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps,
@@ -249,6 +257,8 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
                      str(args.data))
     if noise is not None:
         report["noise_estimate"] = noise
+    else:
+        report["stated_noise"] = {"image noise px": image_noise}
     check = ste.convention_check(record, camera, image_noise, gyro_noise, args.mount,
                                  args.gyro_sampling, d.before, args.alpha)
     report["conventions"] = conventions_json(check)
@@ -301,9 +311,10 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
                 d, used, found = diagnose_collimation_auto(
                     lambda s: pe.procedure_problem(data, s, side, prior), args.alpha)
                 sigma = used["angle_sigma_arcsec"] * ARCSEC
-                noise = report_entry(used, found)
+                noise = {"noise_estimate": report_entry(used, found)}
             else:
                 d = diagnose(pe.procedure_problem(data, sigma, side, prior), args.alpha)
+                noise = {"stated_noise": {"angle sigma arcsec": args.angle_sigma_arcsec}}
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     for choice in choices.values():
@@ -312,7 +323,7 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
             print(line, file=sys.stderr)
     extra: dict = {k: c.to_json() for k, c in choices.items()}
     if noise is not None:
-        extra["noise_estimate"] = noise
+        extra.update(noise)
     preface = tuple(f"{k.replace('_', ' ')}: {c.chosen} (stated {c.stated}; "
                     + ", ".join(f"χ² {o} {v:.4g}" for o, v in c.chi2.items()) + "; "
                     + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"

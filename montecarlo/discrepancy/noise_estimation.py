@@ -225,3 +225,29 @@ def format_estimates(estimates: list[Mapping[str, Any]], used: Mapping[str, floa
     lines.append("tests with the noise estimated: F for each effect and for the global test "
                  "(against every effect at once), Pope's tau for each observation")
     return "\n".join(lines)
+
+
+def check_components(options: list[str], whitened_q: list[FloatArray],
+                     stated: Mapping[str, float], fit: LeastSquaresFit,
+                     level: float = LEVEL) -> dict[str, Any]:
+    """Each stated noise value against the variance components the final model gives (REML,
+    every component free): the estimates and, per value, ``"consistent"``, ``"stated too
+    small"`` (its interval lies above it) or ``"stated too large"``."""
+    found = reml_components(options, whitened_q, stated, [True] * len(options), fit, level)
+    verdict = {e.option: ("stated too small" if e.low > stated[e.option] else
+                          "stated too large" if e.high < stated[e.option] else "consistent")
+               for e in found}
+    return {"estimates": [e.to_json() for e in found], "stated": dict(stated),
+            "verdict": verdict}
+
+
+def format_components(check: Mapping[str, Any]) -> str:
+    """The lines of :func:`check_components`, a warning for each value the data reject."""
+    lines = ["noise values the data give (final model, REML variance components): " + ", ".join(
+        f"{e['option']} {e['value']:.4g} [{e['low']:.4g}, {e['high']:.4g}] (stated "
+        f"{check['stated'][e['option']]:.4g})" for e in check["estimates"])]
+    for option, verdict in check["verdict"].items():
+        if verdict != "consistent":
+            lines.append(f"warning: the stated {option} {check['stated'][option]:.4g} is "
+                         f"rejected by the data ({verdict}); the tests and MDBs above assume it")
+    return "\n".join(lines)

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from montecarlo.discrepancy.candidate_tests import POWER, CandidateTest, chi2_red_band
 from montecarlo.discrepancy.engine import Diagnosis
 from montecarlo.discrepancy.noise import format_noise, noise_scale
-from montecarlo.discrepancy.noise_estimation import format_estimates
+from montecarlo.discrepancy.noise_estimation import format_components, format_estimates
 from montecarlo.discrepancy.problem import OUTLIER, is_outlier
 from montecarlo.lsq import LeastSquaresFit
 
@@ -307,9 +307,12 @@ def format_text(report: Mapping[str, Any]) -> str:
         lines.append(format_estimates(report["noise_estimate"]["estimates"],
                                       report["noise_estimate"]["used"]))
     elif "noise_scale" in report:
-        stated = {k.replace("_", " "): v for k, v in physics.items()
-                  if "sigma" in k and isinstance(v, int | float) and not isinstance(v, bool)}
+        stated = report.get("stated_noise") or {
+            k.replace("_", " "): v for k, v in physics.items()
+            if "sigma" in k and isinstance(v, int | float) and not isinstance(v, bool)}
         lines.append(format_noise(report["noise_scale"], stated))
+        if report.get("noise_components"):
+            lines.append(format_components(report["noise_components"]))
     if report["unexplained"]:
         lines.append("a misfit remains that no candidate explains; the largest standardised "
                      "residuals are at:")
