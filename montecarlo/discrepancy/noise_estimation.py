@@ -137,9 +137,11 @@ def satterthwaite(theta: float, var: float, level: float = LEVEL
     nu = 2.0 * theta**2 / var if var > 0 else math.inf
     if not math.isfinite(nu) or nu <= 0:
         return math.nan, math.nan, nu
-    hi_q, lo_q = stats.chi2.ppf([(1 + level) / 2, (1 - level) / 2], nu)
+    hi_q, lo_q = (float(x) for x in stats.chi2.ppf([(1 + level) / 2, (1 - level) / 2], nu))
+    # with nu near 0 the quantiles underflow: the data leave the component undetermined
+    low = math.sqrt(nu * theta / hi_q) if hi_q > 0 else 0.0
     high = math.sqrt(nu * theta / lo_q) if lo_q > 0 else math.inf
-    return math.sqrt(nu * theta / hi_q), high, nu
+    return low, high, nu
 
 
 def scale_estimate(option: str, used: float, fit: LeastSquaresFit, level: float = LEVEL
