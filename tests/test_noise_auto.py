@@ -2,7 +2,7 @@
 band of 95 % (two-sided), and on sets of at least 1,000 residuals the estimate is within 5 %
 of the true sigma in at least 95 % of sets. Each set is simulated without an effect and
 diagnosed as ``diagnose ... auto`` does it (:mod:`montecarlo.cli.noise_options`: the tests of
-an estimated noise, the estimate from the final model). Slow: about 15 minutes on 2 cores.
+an estimated noise, the estimate from the final model). Slow: about 15 minutes of CPU.
 """
 
 import math
@@ -63,17 +63,17 @@ def test_collimation_angle_sigma_interval_coverage(figures):
 
 
 def test_ground_pixel_sigma_coverage_with_the_survey_known(figures):
-    """1,000 null sets of 36 targets at 50 and 100 m (72 residuals), pixel 0.3 px, survey
+    """600 null sets of 36 targets at 50 and 100 m (72 residuals), pixel 0.3 px, survey
     1 cm stated."""
-    estimates, _ = _ground((6, 6), (50.0, 100.0), SURVEY, 1000, seed=4)
+    estimates, _ = _ground((6, 6), (50.0, 100.0), SURVEY, 600, seed=4)
     _record_share(figures, "ground.pixel_sigma.survey_known.coverage_95", estimates,
                   "pixel_sigma_px", PIXEL)
 
 
 def test_ground_pixel_sigma_within_5_percent_on_1024_residuals(figures):
-    """200 null sets of 512 targets (1,024 residuals): within 5 % of 0.3 px in >= 95 %
+    """100 null sets of 512 targets (1,024 residuals): within 5 % of 0.3 px in >= 95 %
     (the chi-square(1,021) spread alone gives 97.7 %); the interval's coverage also."""
-    estimates, n = _ground((32, 16), (50.0, 100.0), SURVEY, 200, seed=5)
+    estimates, n = _ground((32, 16), (50.0, 100.0), SURVEY, 100, seed=5)
     assert n >= 1000
     close = np.mean([abs(e["pixel_sigma_px"].value / PIXEL - 1) <= 0.05 for e in estimates])
     print(f"within 5 %: {close:.3f} of {len(estimates)} sets of {n} residuals")
@@ -84,10 +84,10 @@ def test_ground_pixel_sigma_within_5_percent_on_1024_residuals(figures):
 
 
 def test_ground_variance_components_coverage(figures):
-    """1,000 null sets of 36 targets at 10 and 20 m, where a 1 cm survey error moves a target
+    """600 null sets of 36 targets at 10 and 20 m, where a 1 cm survey error moves a target
     by about as many pixels as the 0.3 px noise: both sigma auto (REML), each component's
     Satterthwaite interval."""
-    estimates, _ = _ground((6, 6), (10.0, 20.0), SURVEY, 1000, survey_option="auto", seed=6)
+    estimates, _ = _ground((6, 6), (10.0, 20.0), SURVEY, 600, survey_option="auto", seed=6)
     _record_share(figures, "ground.reml.pixel_sigma.coverage_95", estimates,
                   "pixel_sigma_px", PIXEL)
     _record_share(figures, "ground.reml.survey_sigma.coverage_95", estimates,

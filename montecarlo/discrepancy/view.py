@@ -246,6 +246,11 @@ def _why_dropped(e: Mapping[str, Any]) -> str:
     return "its adapted model is singular with these data: not fitted"
 
 
+FEW_DOF = 10
+"""Below this many degrees of freedom left to estimate the noise beside a candidate, its F
+test under ``auto`` is weak (the F(q, d) critical value grows fast as d falls)."""
+
+
 def d_estimated(report: Mapping[str, Any]) -> bool:
     """The diagnosis took the noise as estimated from the data."""
     return bool(report.get("noise_estimate"))
@@ -306,6 +311,13 @@ def format_text(report: Mapping[str, Any]) -> str:
     if report.get("noise_estimate"):
         lines.append(format_estimates(report["noise_estimate"]["estimates"],
                                       report["noise_estimate"]["used"]))
+        weak = [f"{c['name']} {test_name(c)}" for c in report["candidates"]
+                if c["status"] == "testable" and c.get("test") == "F"
+                and c["dof2"] < FEW_DOF]
+        if weak:
+            lines.append("warning: with the noise estimated, fewer than "
+                         f"{FEW_DOF} degrees of freedom are left beside " + ", ".join(weak)
+                         + ": their tests have little power; state the noise if it is known")
     elif "noise_scale" in report:
         stated = report.get("stated_noise") or {
             k.replace("_", " "): v for k, v in physics.items()
