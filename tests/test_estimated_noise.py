@@ -249,3 +249,21 @@ def test_ground_auto_prints_both_components_and_a_stated_value_the_data_reject(c
     out = capsys.readouterr().out
     assert "warning: the stated pixel_sigma_px 0.15 is rejected by the data (stated too " \
            "small)" in out
+
+
+def test_a_candidate_with_no_degree_of_freedom_left_is_not_tested():
+    """Four points, a line and a two-parameter candidate: n - p - q = 0, no F test."""
+    x = np.array([-1.0, 0.0, 0.5, 1.0])
+    y = np.array([0.1, -0.2, 0.3, 0.05])
+
+    def residuals(v):
+        g = {k: np.asarray(v.get(k, 0.0), float) for k in "abde"}
+        return y - g["a"] - g["b"] * x - g["d"] * x**2 - g["e"] * x**3
+
+    problem = Problem("toy", Effect("line", ("a", "b"), (INF, INF), (1e-3, 1e-3)),
+                      (Effect("curve", ("d", "e"), (INF, INF), (1e-3, 1e-3)),), residuals,
+                      {"a": 0.0, "b": 0.0})
+    fit = fit_model(problem, ())
+    (t,) = analyse_candidates(problem, fit, test="F")
+    assert t.status == "undetectable" and "no degree of freedom" in t.reason
+    assert analyse_candidates(problem, fit)[0].status == "testable"

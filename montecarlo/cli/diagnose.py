@@ -32,8 +32,8 @@ from montecarlo.cli.common import (
 from montecarlo.cli.noise_options import (
     AUTO,
     AUTO_HELP,
-    diagnose_collimation_auto,
-    diagnose_ground_auto,
+    diagnose_collimation,
+    diagnose_ground,
     diagnose_stabilization_auto,
     nonnegative_or_auto,
     positive_or_auto,
@@ -121,9 +121,7 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     steps = Steps()
     with steps("loading", LIBRARIES):
         from montecarlo.discrepancy import ground_effects as ge
-        from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError
-        from montecarlo.discrepancy.noise_estimation import check_components
         from montecarlo.geometry.camera import Camera
         from montecarlo.io.ground_csv import read_ground_csv
 
@@ -137,24 +135,11 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
                            "parameters of an effect + 1 degree of freedom, 2 image coordinates "
                            "per row")
     ge.check_in_front(data, camera, str(args.data))
-    sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
-    extra = None
     try:
         with steps("the diagnosis", fit_why(2 * len(data.pixels), 6)):
-            if AUTO in (sigma, survey):
-                d, used, found = diagnose_ground_auto(data, camera, sigma, survey,
-                                                      args.refraction_k, args.alpha)
-                sigma, survey = used["pixel_sigma_px"], used["survey_sigma_m"]
-                extra = {"noise_estimate": report_entry(used, found)}
-            else:
-                d = diagnose(ge.ground_problem(data, camera, sigma, survey,
-                                               args.refraction_k), args.alpha)
-                extra = {"stated_noise": {"pixel sigma px": sigma, "survey sigma m": survey}}
-                if survey > 0:  # each stated value against the components the data give
-                    extra["noise_components"] = check_components(
-                        ["pixel_sigma_px", "survey_sigma_m"], ge.whitened_noise_components(
-                            data, camera, sigma, survey, args.refraction_k),
-                        {"pixel_sigma_px": sigma, "survey_sigma_m": survey}, d.after)
+            d, sigma, survey, extra = diagnose_ground(data, camera, args.pixel_sigma_px,
+                                                      args.survey_sigma_m, args.refraction_k,
+                                                      args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
@@ -166,7 +151,6 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     steps = Steps()
     with steps("loading", LIBRARIES):
         from montecarlo.discrepancy import collimation_effects as ce
-        from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError
         from montecarlo.io.collimation_csv import read_mirror_csv
 
@@ -182,17 +166,10 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     data = read_mirror_csv(args.data, ce.min_mirrors(), "frame heading + up to 2 parameters "
                            "of an effect + 1 degree of freedom, 2 readings per mirror")
     _check_separable(args.data, data)
-    extra = None
     try:
         with steps("the diagnosis", fit_why(2 * len(data.sets), 4)):
-            if args.angle_sigma_arcsec == AUTO:
-                d, used, found = diagnose_collimation_auto(
-                    lambda s: ce.collimation_problem(data, s), args.alpha)
-                sigma = used["angle_sigma_arcsec"] * ARCSEC
-                extra = {"noise_estimate": report_entry(used, found)}
-            else:
-                d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
-                extra = {"stated_noise": {"angle sigma arcsec": args.angle_sigma_arcsec}}
+            d, sigma, extra = diagnose_collimation(lambda s: ce.collimation_problem(data, s),
+                                                   args.angle_sigma_arcsec, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps,
@@ -284,7 +261,6 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
     import sys
 
     from montecarlo.discrepancy import procedure_effects as pe
-    from montecarlo.discrepancy.engine import diagnose
     from montecarlo.discrepancy.fit import FitError
     from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, read_mirror_csv
 
@@ -296,10 +272,8 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
         raise InputError(f"{args.data}: {measured} measured (azimuth/pitch) mirrors, at least "
                          f"{pe.min_mirrors()} needed")
     prior = math.radians(2.0 if args.roll_sigma_deg is None else args.roll_sigma_deg)
-    auto = not math.isfinite(sigma)
-    noise = None
     try:
-        if auto:  # the conventions compared at the base model's a-posteriori sigma
+        if args.angle_sigma_arcsec == AUTO:  # conventions at the base model's a-posteriori S
             _, _, first = pe.choose_conventions(data, ARCSEC, args.roll_mirror or "auto",
                                                 args.azimuth_sense or "auto", prior)
             best = min(first["roll_mirror"].chi2.values())
@@ -307,14 +281,9 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
         data, side, choices = pe.choose_conventions(data, sigma, args.roll_mirror or "auto",
                                                     args.azimuth_sense or "auto", prior)
         with steps("the diagnosis", fit_why(2 * measured, 4)):
-            if auto:
-                d, used, found = diagnose_collimation_auto(
-                    lambda s: pe.procedure_problem(data, s, side, prior), args.alpha)
-                sigma = used["angle_sigma_arcsec"] * ARCSEC
-                noise = {"noise_estimate": report_entry(used, found)}
-            else:
-                d = diagnose(pe.procedure_problem(data, sigma, side, prior), args.alpha)
-                noise = {"stated_noise": {"angle sigma arcsec": args.angle_sigma_arcsec}}
+            d, sigma, noise = diagnose_collimation(
+                lambda s: pe.procedure_problem(data, s, side, prior), args.angle_sigma_arcsec,
+                args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     for choice in choices.values():
@@ -322,8 +291,7 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
         if line:
             print(line, file=sys.stderr)
     extra: dict = {k: c.to_json() for k, c in choices.items()}
-    if noise is not None:
-        extra.update(noise)
+    extra.update(noise)
     preface = tuple(f"{k.replace('_', ' ')}: {c.chosen} (stated {c.stated}; "
                     + ", ".join(f"χ² {o} {v:.4g}" for o, v in c.chi2.items()) + "; "
                     + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"

@@ -119,3 +119,43 @@ def diagnose_ground_auto(data: GroundData, camera: Camera, pixel: float | str,
         return [pivot_component(option, build, used, fit)]
 
     return diagnose_estimated(build, start, estimate, alpha)
+
+
+def diagnose_collimation(build: Callable[[float], Problem], angle_sigma: float | str,
+                         alpha: float) -> tuple[Diagnosis, float, dict[str, Any]]:
+    """``diagnose collimation`` at ``--angle-sigma-arcsec`` S or ``auto``: the diagnosis,
+    the sigma [rad] its tests used and the report's noise keys; ``build(sigma [rad])``."""
+    from montecarlo.discrepancy.engine import diagnose
+
+    if angle_sigma == AUTO:
+        d, used, found = diagnose_collimation_auto(build, alpha)
+        return d, used["angle_sigma_arcsec"] * ARCSEC, {
+            "noise_estimate": report_entry(used, found)}
+    sigma = float(angle_sigma) * ARCSEC
+    return diagnose(build(sigma), alpha), sigma, {
+        "stated_noise": {"angle sigma arcsec": angle_sigma}}
+
+
+def diagnose_ground(data: GroundData, camera: Camera, pixel: float | str,
+                    survey: float | str, refraction: float, alpha: float
+                    ) -> tuple[Diagnosis, float, float, dict[str, Any]]:
+    """``diagnose ground`` with stated or ``auto`` noise: the diagnosis, the pixel [px] and
+    survey [m] sigma its tests used, and the report's noise keys (with both stated and a
+    survey sigma above 0, each checked against the final model's REML components)."""
+    from montecarlo.discrepancy import ground_effects as ge
+    from montecarlo.discrepancy.engine import diagnose
+    from montecarlo.discrepancy.noise_estimation import check_components
+
+    if AUTO in (pixel, survey):
+        d, used, found = diagnose_ground_auto(data, camera, pixel, survey, refraction, alpha)
+        return d, used["pixel_sigma_px"], used["survey_sigma_m"], {
+            "noise_estimate": report_entry(used, found)}
+    px, m = float(pixel), float(survey)
+    d = diagnose(ge.ground_problem(data, camera, px, m, refraction), alpha)
+    extra: dict[str, Any] = {"stated_noise": {"pixel sigma px": px, "survey sigma m": m}}
+    if m > 0:
+        stated = {"pixel_sigma_px": px, "survey_sigma_m": m}
+        extra["noise_components"] = check_components(
+            list(stated), ge.whitened_noise_components(data, camera, px, m, refraction),
+            stated, d.after)
+    return d, px, m, extra

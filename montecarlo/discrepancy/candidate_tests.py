@@ -281,7 +281,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         est = cov @ (Ga.T @ r)
         T = float(est @ N @ est)
         q = len(active)
-        stat, dof2, log_p = T, 0, math.nan
+        stat, dof2 = T, 0
         if test == "chi2":
             lam0 = noncentrality(size, q, power)
             log_p = log_chi2_sf(T, q)
@@ -291,8 +291,12 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
             lam0 = noncentrality_f(size, q, dof2, power)
             log_p = log_f_sf(F, q, dof2)
             stat, dof2 = (F, dof2) if test == "F" else (pope_tau(T, fit.chi2, fit.dof), fit.dof)
-        else:  # no degree of freedom left to estimate the noise beside it
-            lam0, stat = math.inf, math.nan
+        else:  # no degree of freedom left to estimate the noise beside it: not testable
+            tests[c.name] = CandidateTest(c.name, "undetectable", names, retained, absorbed_by,
+                                          reason="no degree of freedom left to estimate the "
+                                          "noise beside it", test=test)
+            log_ps.append(0.0)
+            continue
         mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
         shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
         influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))

@@ -32,7 +32,9 @@ snooping, Teunissen's DIA):
    winner's column space with fewer parameters that explains its signal (alone or with one
    other candidate) is adapted instead: the group's minimal parametrisation
    (:func:`minimal_member`); the groups reported are those of the final model. A rejected
-   global test with no candidate rejected is a misfit no candidate explains.
+   global test with no candidate rejected is a misfit no candidate explains. With the noise
+   estimated from the data (``noise_estimated``) the tests are F and Pope's tau
+   (:mod:`montecarlo.discrepancy.estimated_sigma`).
 4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2 (a winner
    whose adapted model is singular is not adapted but dropped, with p = NaN); stop when no
    candidate is rejected.
