@@ -127,7 +127,7 @@ def reml(residual: FloatArray, A: FloatArray, Q: list[FloatArray], theta: FloatA
         theta[idx] = new
         if change < tol:
             break
-    return theta, 2.0 * np.linalg.inv(H)
+    return theta, np.asarray(2.0 * np.linalg.inv(H), dtype=np.float64)
 
 
 def satterthwaite(theta: float, var: float, level: float = LEVEL
@@ -159,11 +159,12 @@ def pivot_component(option: str, build: Callable[[Mapping[str, float]], Problem]
                     ) -> NoiseEstimate:
     """One unknown sigma among known ones: the pivot of the module docstring on the final
     model (its parameters held, flagged observations' rows left out)."""
-    params = {k: v for k, v in fit.params.items() if not is_outlier(k)}
+    params = {k: np.float64(v) for k, v in fit.params.items() if not is_outlier(k)}
     drop = flagged_rows(build(sigmas), fit)
 
     def chi2_of(s: float) -> float:
-        r = np.asarray(build({**sigmas, option: s}).residuals(params), float)
+        r = np.asarray(build({**sigmas, option: s}).residuals(params),  # type: ignore[arg-type]
+                       dtype=np.float64)
         return float(np.sum(np.delete(r, drop) ** 2))
 
     value, low, high = pivot_estimate(chi2_of, fit.dof, sigmas[option], level)
