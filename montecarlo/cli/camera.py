@@ -19,6 +19,13 @@ from montecarlo.cli.common import (
     positive,
     write_provenance,
 )
+from montecarlo.cli.noise_options import (
+    AUTO,
+    AUTO_HELP,
+    diagnose_scaled,
+    positive_or_auto,
+    report_entry,
+)
 from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
@@ -109,7 +116,7 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         from montecarlo.camera_calibration.calibrate import CalibrationError
         from montecarlo.discrepancy import camera_effects as cam
         from montecarlo.discrepancy.engine import diagnose
-        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.discrepancy.fit import FitError, fit_model
         from montecarlo.discrepancy.significance import (
             format_significance,
             practical_significance,
@@ -133,31 +140,32 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         data, where = det.data, "--images"
         source = f"{len(det.found)} images ({det.found[0].path} ... {det.found[-1].path})"
     sigma = args.pixel_sigma_px
-    estimated: dict[str, float] | None = None
+    noise = None
     try:
-        if sigma == "auto":
-            with steps("estimating the pixel sigma", fit_why(2 * data.n,
-                                                             13 + 6 * len(data.views))):
-                estimated = cam.estimate_pixel_sigma(data)
-            sigma = estimated["sigma"]
-        with steps("the diagnosis", fit_why(2 * data.n, 4 + 6 * len(data.views))):
-            d = diagnose(cam.camera_problem(data, sigma), args.alpha)
+        if sigma == AUTO:
+            # started at the model with every candidate fitted, then the final model's
+            with steps("the diagnosis, the pixel sigma estimated",
+                       fit_why(2 * data.n, 13 + 6 * len(data.views))):
+                d, used, found = diagnose_scaled(
+                    lambda s: cam.camera_problem(data, s), "pixel_sigma_px", args.alpha,
+                    initial=lambda p: fit_model(p, [c.name for c in cam.CANDIDATES]))
+            sigma = used["pixel_sigma_px"]
+            noise = report_entry(used, found)
+        else:
+            with steps("the diagnosis", fit_why(2 * data.n, 4 + 6 * len(data.views))):
+                d = diagnose(cam.camera_problem(data, sigma), args.alpha)
     except (FitError, CalibrationError) as exc:
         raise InputError(f"{where}: {exc}") from None
     view = cam.report_view(data, sigma)
     report = to_json(d, view, source)
+    if noise is not None:
+        report["noise_estimate"] = noise
     significance = practical_significance(d, view, cam.INTRINSIC_REPORTED)
     error = cam.pixel_error(d, data, sigma)
     report.update({"rms_convention": RMS_CONVENTION, "camera": camera_summary(d),
-                   "practical_significance": significance, "pixel_error": error,
-                   "pixel_sigma_estimated": estimated})
+                   "practical_significance": significance, "pixel_error": error})
     camera = report["camera"]
-    head = [] if estimated is None else [
-        f"pixel sigma estimated from the data (every candidate fitted, {estimated['dof']} "
-        f"dof): {estimated['sigma']:.4g} px, 95 % interval [{estimated['low']:.4g}, "
-        f"{estimated['high']:.4g}] px; the tests below take it as known (chi-square in "
-        "place of F)", ""]
-    lines = [*head, format_text(report), "", RMS_CONVENTION,
+    lines = [format_text(report), "", RMS_CONVENTION,
              "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
                  f"{k} = {v['value']:.6g} ± {v['stderr']:.2g}{_unit(v['unit'])}"
                  for k, v in camera.items() if v["stderr"] > 0),
@@ -373,11 +381,6 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_camera_detect)
 
 
-def positive_or_auto(text: str) -> float | str:
-    """A positive number, or ``auto`` (estimate it from the data)."""
-    return "auto" if text.strip().lower() == "auto" else positive(text)
-
-
 def add_diagnose_parser(dsub: argparse._SubParsersAction,
                         basic: Callable[[argparse.ArgumentParser], None]) -> None:
     """``diagnose camera``: from the two CSV files, or from photographs (``--images``)."""
@@ -392,8 +395,8 @@ def add_diagnose_parser(dsub: argparse._SubParsersAction,
                    "--board and --square-mm")
     detection_options(p, required=False)
     p.add_argument("--pixel-sigma-px", type=positive_or_auto, required=True, metavar="S",
-                   help="standard deviation of each image coordinate of a corner [px], or "
-                   "'auto': estimated from the data (the model with every candidate fitted)")
+                   help="standard deviation of each image coordinate of a corner [px]"
+                   + AUTO_HELP)
     p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json, "
                    "residuals.csv and plots (residuals against radius and image position, gap; "
                    "with --images also the residuals drawn on each image, the corners found "

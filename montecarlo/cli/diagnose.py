@@ -29,6 +29,16 @@ from montecarlo.cli.common import (
     write_provenance,
     write_text,
 )
+from montecarlo.cli.noise_options import (
+    AUTO,
+    AUTO_HELP,
+    diagnose_collimation,
+    diagnose_ground,
+    diagnose_stabilization_auto,
+    nonnegative_or_auto,
+    positive_or_auto,
+    report_entry,
+)
 from montecarlo.cli.stabilization import conventions_json, conventions_text
 from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
 from montecarlo.errors import InputError
@@ -43,6 +53,10 @@ if TYPE_CHECKING:
 
 def _unit(unit: str) -> str:
     return "" if unit == "1" else f" {unit}"
+
+
+START_IMAGE_NOISE = 0.1
+"""Image noise [px] the estimator's start and the first pass use under ``auto``."""
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -107,7 +121,6 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     steps = Steps()
     with steps("loading", LIBRARIES):
         from montecarlo.discrepancy import ground_effects as ge
-        from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError
         from montecarlo.geometry.camera import Camera
         from montecarlo.io.ground_csv import read_ground_csv
@@ -122,27 +135,27 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
                            "parameters of an effect + 1 degree of freedom, 2 image coordinates "
                            "per row")
     ge.check_in_front(data, camera, str(args.data))
-    sigma, survey = args.pixel_sigma_px, args.survey_sigma_m
     try:
         with steps("the diagnosis", fit_why(2 * len(data.pixels), 6)):
-            d = diagnose(ge.ground_problem(data, camera, sigma, survey, args.refraction_k),
-                         args.alpha)
+            d, sigma, survey, extra = diagnose_ground(data, camera, args.pixel_sigma_px,
+                                                      args.survey_sigma_m, args.refraction_k,
+                                                      args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
-                                                     args.refraction_k), str(args.data), steps)
+                                                     args.refraction_k), str(args.data), steps,
+                             extra)
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     steps = Steps()
     with steps("loading", LIBRARIES):
         from montecarlo.discrepancy import collimation_effects as ce
-        from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError
         from montecarlo.io.collimation_csv import read_mirror_csv
 
     _check_outputs(args)
-    sigma = args.angle_sigma_arcsec * ARCSEC
+    sigma = math.nan if args.angle_sigma_arcsec == AUTO else args.angle_sigma_arcsec * ARCSEC
     if args.readings == "reference":
         return _diagnose_procedure(args, sigma, steps)
     for flag, used in (("--roll-mirror", args.roll_mirror),
@@ -155,10 +168,12 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     _check_separable(args.data, data)
     try:
         with steps("the diagnosis", fit_why(2 * len(data.sets), 4)):
-            d = diagnose(ce.collimation_problem(data, sigma), args.alpha)
+            d, sigma, extra = diagnose_collimation(lambda s: ce.collimation_problem(data, s),
+                                                   args.angle_sigma_arcsec, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
-    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps)
+    return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps,
+                             extra)
 
 
 def _check_separable(path: str, data: MirrorData) -> None:
@@ -184,6 +199,7 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
         from montecarlo.geometry.camera import Camera
         from montecarlo.io.stabilization_csv import read_csv
         from montecarlo.output.provenance import provenance
+        from montecarlo.seed001 import estimate as se
         from montecarlo.units import DEG_PER_ROOT_HOUR
 
     check_json_option(args)
@@ -192,18 +208,35 @@ def _cmd_diagnose_stabilization(args: argparse.Namespace) -> int:
     camera = Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
     gyro_noise = args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR
     n = len(record.t)
+    image_noise = START_IMAGE_NOISE if args.image_noise_px == AUTO else args.image_noise_px
+    noise = None
     try:
         with steps("the estimator's start", f"recursive least squares over the {n} samples, "
                    "then the image walk's Kalman whitening"):
-            problem = ste.stabilization_problem(record, camera, args.image_noise_px,
-                                                gyro_noise, args.mount, args.gyro_sampling)
+            est = se.estimate(record.t, record.gyro, record.eta, record.eps, record.los_px,
+                              camera, image_noise, gyro_noise, mount=args.mount,
+                              gyro_sampling=args.gyro_sampling)
+            problem = ste.stabilization_problem(record, camera, image_noise, gyro_noise,
+                                                args.mount, args.gyro_sampling, est)
         with steps("the diagnosis", fit_why(2 * n, len(problem.base.parameters))):
-            d = diagnose(problem, args.alpha)
+            if args.image_noise_px == AUTO:
+                d, used, found = diagnose_stabilization_auto(
+                    lambda s: ste.stabilization_problem(record, camera, s, gyro_noise,
+                                                        args.mount, args.gyro_sampling, est),
+                    gyro_noise, image_noise, args.alpha)
+                image_noise = used["image_noise_px"]
+                noise = report_entry(used, found)
+            else:
+                d = diagnose(problem, args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
                      str(args.data))
-    check = ste.convention_check(record, camera, args.image_noise_px, gyro_noise, args.mount,
+    if noise is not None:
+        report["noise_estimate"] = noise
+    else:
+        report["stated_noise"] = {"image noise px": image_noise}
+    check = ste.convention_check(record, camera, image_noise, gyro_noise, args.mount,
                                  args.gyro_sampling, d.before, args.alpha)
     report["conventions"] = conventions_json(check)
     record_args = {"input": str(args.data), "alpha": args.alpha, "mount": args.mount,
@@ -228,7 +261,6 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
     import sys
 
     from montecarlo.discrepancy import procedure_effects as pe
-    from montecarlo.discrepancy.engine import diagnose
     from montecarlo.discrepancy.fit import FitError
     from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, read_mirror_csv
 
@@ -241,17 +273,25 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
                          f"{pe.min_mirrors()} needed")
     prior = math.radians(2.0 if args.roll_sigma_deg is None else args.roll_sigma_deg)
     try:
+        if args.angle_sigma_arcsec == AUTO:  # conventions at the base model's a-posteriori S
+            _, _, first = pe.choose_conventions(data, ARCSEC, args.roll_mirror or "auto",
+                                                args.azimuth_sense or "auto", prior)
+            best = min(first["roll_mirror"].chi2.values())
+            sigma = ARCSEC * math.sqrt(best / (2 * measured - 4))
         data, side, choices = pe.choose_conventions(data, sigma, args.roll_mirror or "auto",
                                                     args.azimuth_sense or "auto", prior)
         with steps("the diagnosis", fit_why(2 * measured, 4)):
-            d = diagnose(pe.procedure_problem(data, sigma, side, prior), args.alpha)
+            d, sigma, noise = diagnose_collimation(
+                lambda s: pe.procedure_problem(data, s, side, prior), args.angle_sigma_arcsec,
+                args.alpha)
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     for choice in choices.values():
         line = choice.warning()
         if line:
             print(line, file=sys.stderr)
-    extra = {k: c.to_json() for k, c in choices.items()}
+    extra: dict = {k: c.to_json() for k, c in choices.items()}
+    extra.update(noise)
     preface = tuple(f"{k.replace('_', ' ')}: {c.chosen} (stated {c.stated}; "
                     + ", ".join(f"χ² {o} {v:.4g}" for o, v in c.chi2.items()) + "; "
                     + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"
@@ -444,10 +484,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="full fields of view about z (yaw) and x (pitch) [deg]")
     p.add_argument("--pixels", type=positive_int, nargs=2, required=True,
                    metavar=("NX", "NZ"), help="pixel counts across x and z")
-    p.add_argument("--pixel-sigma-px", type=positive, required=True, metavar="S",
-                   help="standard deviation of each image coordinate [px]")
-    p.add_argument("--survey-sigma-m", type=nonnegative, default=0.0, metavar="S",
-                   help="standard deviation of each surveyed coordinate [m] (default 0)")
+    p.add_argument("--pixel-sigma-px", type=positive_or_auto, required=True, metavar="S",
+                   help="standard deviation of each image coordinate [px]" + AUTO_HELP)
+    p.add_argument("--survey-sigma-m", type=nonnegative_or_auto, default=0.0, metavar="S",
+                   help="standard deviation of each surveyed coordinate [m] (default 0)"
+                   + AUTO_HELP + "; both auto: REML variance components")
     refraction_option(p, "standard coefficient of refraction of the base model, which also "
                       "has earth curvature")
     common(p)
@@ -456,11 +497,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p = dsub.add_parser("collimation", help="autocollimator-INS mirror readings (seed 003)")
     p.add_argument("data", help="CSV: mirror, set, theodolite_az_deg, theodolite_el_deg, "
                    "ins_az_deg, ins_el_deg[, ins_roll_deg]")
-    p.add_argument("--angle-sigma-arcsec", type=positive, required=True, metavar="S",
+    p.add_argument("--angle-sigma-arcsec", type=positive_or_auto, required=True, metavar="S",
                    help="standard deviation of a heading or pitch difference, theodolite and "
                    "INS combined [arc-seconds]; under --readings reference each angle of the "
                    "file is taken to err by S/sqrt(2) and the relative readings' covariance "
-                   "is propagated from that")
+                   "is propagated from that" + AUTO_HELP)
     p.add_argument("--readings", choices=("reference", "absolute"), default="reference",
                    help="reference (default): the paper's procedure, readings relative to the "
                    "INS's reference (reference rows, or relative readings); absolute: the "
@@ -486,8 +527,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="square field of view [deg] (5)")
     p.add_argument("--pixels", type=positive_int, default=1024,
                    help="pixels across the image (1024)")
-    p.add_argument("--image-noise-px", type=positive, default=0.1,
-                   help="image noise per axis [px] (0.1)")
+    p.add_argument("--image-noise-px", type=positive_or_auto, default=0.1,
+                   help="image noise per axis [px] (0.1)" + AUTO_HELP + " (the gyro walk "
+                   "known)")
     p.add_argument("--gyro-arw-deg-per-rt-h", type=nonnegative, default=0.01,
                    help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
     p.add_argument("--mount", choices=("patent", "inner-gimbal"), default="patent",

@@ -19,6 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, stats
 
+from montecarlo.discrepancy.estimated_sigma import (
+    f_statistic,
+    log_f_sf,
+    noncentrality_f,
+    pope_tau,
+)
 from montecarlo.discrepancy.fit import jacobian
 from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.lsq import LeastSquaresFit
@@ -130,7 +136,10 @@ class CandidateTest:
     active : parameters tested (not absorbed).
     retained : parameter -> fraction of its column's norm left after projection on the model.
     absorbed_by : absorbed parameter -> model parameters that absorb it.
-    statistic, dof, p_value, log_p : likelihood-ratio statistic ``T`` and its chi2(dof) tail.
+    statistic, dof, p_value, log_p : the statistic of its test and its tail: ``T`` and
+        chi2(dof) with the noise known (``test`` "chi2"); with the noise estimated, ``F`` and
+        F(dof, dof2) for an effect ("F"), Pope's ``tau`` for an observation ("tau", the same
+        p-value, :mod:`montecarlo.discrepancy.estimated_sigma`).
     p_adjusted : Holm-adjusted p-value over the detection family (NaN outside it); the engine
         sets it over the whole family (global test, effects, observations), this module
         within the candidates analysed together.
@@ -143,6 +152,8 @@ class CandidateTest:
     lambda0 : noncentrality at which its own test rejects with ``power``.
     level : size of its own test at the first step of Holm's procedure (the MDB's test).
     reason : text for statuses other than testable.
+    test, dof2 : the test ("chi2", "F" or "tau") and its second degrees of freedom (F's
+        denominator ``n - p - q``; for tau the model's ``n - p``; 0 for chi2).
     """
 
     name: str
@@ -164,6 +175,8 @@ class CandidateTest:
     level: float = math.nan
     basis: FloatArray | None = field(default=None, repr=False, compare=False)
     projected: FloatArray | None = field(default=None, repr=False, compare=False)
+    test: str = "chi2"
+    dof2: int = 0
 
 
 def _orthonormal(M: FloatArray) -> FloatArray:
@@ -185,7 +198,8 @@ def _absorbed_by(column: FloatArray, A: FloatArray, names: Sequence[str]) -> lis
 
 def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
                        power: float = POWER, absorbed: float = ABSORBED,
-                       level: Callable[[int], float] | None = None) -> list[CandidateTest]:
+                       level: Callable[[int], float] | None = None, test: str = "chi2"
+                       ) -> list[CandidateTest]:
     """Identification statistics of every candidate against the model of ``fit``.
 
     Linearised at the fitted values with each candidate's parameters at zero. See the module
@@ -193,6 +207,8 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
     family are the candidates with at least one active parameter; ``level(m)`` is the size of
     each one's own test when there are ``m`` (default: candidate effects in the detection
     family of :func:`family_levels`); Holm's adjustment here is within these candidates.
+    ``test`` is "chi2" (the noise known), "F" or "tau" (the noise estimated: effects,
+    observations).
     """
     A = fit.jacobian
     Q = _orthonormal(A)
@@ -265,23 +281,37 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         est = cov @ (Ga.T @ r)
         T = float(est @ N @ est)
         q = len(active)
-        lam0 = noncentrality(size, q, power)
+        stat, dof2 = T, 0
+        if test == "chi2":
+            lam0 = noncentrality(size, q, power)
+            log_p = log_chi2_sf(T, q)
+        elif fit.dof - q > 0:
+            dof2 = fit.dof - q
+            F = f_statistic(T, fit.chi2, fit.dof, q)
+            lam0 = noncentrality_f(size, q, dof2, power)
+            log_p = log_f_sf(F, q, dof2)
+            stat, dof2 = (F, dof2) if test == "F" else (pope_tau(T, fit.chi2, fit.dof), fit.dof)
+        else:  # no degree of freedom left to estimate the noise beside it: not testable
+            tests[c.name] = CandidateTest(c.name, "undetectable", names, retained, absorbed_by,
+                                          reason="no degree of freedom left to estimate the "
+                                          "noise beside it", test=test)
+            log_ps.append(0.0)
+            continue
         mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
         shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
         influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))
         reach = sum(max(abs(c.bounds[j][0]), abs(c.bounds[j][1])) * math.sqrt(N[k, k])
                     for k, j in enumerate(active)) ** 2
-        log_p = log_chi2_sf(T, q)
         status, reason = "testable", ""
         if reach < lam0:
             status = "undetectable"
             reason = (f"noncentrality at most {reach:.3g} within its physical bounds, "
                       f"{lam0:.3g} needed")
         tests[c.name] = CandidateTest(
-            c.name, status, names, retained, absorbed_by, T, q, float(np.exp(log_p)), log_p,
+            c.name, status, names, retained, absorbed_by, stat, q, float(np.exp(log_p)), log_p,
             math.nan, dict(zip(names, est.tolist(), strict=True)),
             dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
-            lam0, reason, size, _orthonormal(Ga), Ga)
+            lam0, reason, size, _orthonormal(Ga), Ga, test, dof2)
         log_ps.append(log_p)
     if work:
         adjusted = holm(np.exp(log_ps))
@@ -302,14 +332,19 @@ def canonical_correlation(a: CandidateTest, b: CandidateTest) -> float:
     return float(min(1.0, np.linalg.svd(a.basis.T @ b.basis, compute_uv=False)[0]))
 
 
-def wald_test(fit: LeastSquaresFit, parameters: Sequence[str]) -> tuple[float, int, float]:
+def wald_test(fit: LeastSquaresFit, parameters: Sequence[str], estimated: bool = False
+              ) -> tuple[float, int, float]:
     """Wald statistic ``b' C^-1 b`` of fitted ``parameters`` (those in the fit) against zero,
-    its degrees of freedom and its chi-square p-value."""
+    its degrees of freedom and its chi-square p-value; with the noise ``estimated``, the
+    statistic over ``q`` and the fit's variance factor, ``F(q, n - p)``."""
     idx = [fit.names.index(p) for p in parameters if p in fit.names]
     if not idx:
         return 0.0, 0, 1.0
     b = fit.values[idx]
     T = float(b @ np.linalg.solve(fit.covariance[np.ix_(idx, idx)], b))
+    if estimated:
+        F = T / len(idx) / fit.chi2_red
+        return F, len(idx), float(stats.f.sf(F, len(idx), fit.dof))
     return T, len(idx), float(stats.chi2.sf(T, len(idx)))
 
 

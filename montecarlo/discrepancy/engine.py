@@ -32,7 +32,9 @@ snooping, Teunissen's DIA):
    winner's column space with fewer parameters that explains its signal (alone or with one
    other candidate) is adapted instead: the group's minimal parametrisation
    (:func:`minimal_member`); the groups reported are those of the final model. A rejected
-   global test with no candidate rejected is a misfit no candidate explains.
+   global test with no candidate rejected is a misfit no candidate explains. With the noise
+   estimated from the data (``noise_estimated``) the tests are F and Pope's tau
+   (:mod:`montecarlo.discrepancy.estimated_sigma`).
 4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2 (a winner
    whose adapted model is singular is not adapted but dropped, with p = NaN); stop when no
    candidate is rejected.
@@ -81,6 +83,7 @@ from montecarlo.discrepancy.confounding import (
     minimal_member,
     separated,
 )
+from montecarlo.discrepancy.estimated_sigma import global_f
 from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier, with_outliers
 from montecarlo.lsq import LeastSquaresFit
@@ -165,6 +168,8 @@ class Diagnosis:
     model (see :func:`diagnose`)."""
     confounded: list[Group] = field(default_factory=list)
     """The confounded group of each named effect, given the final model (see :class:`Group`)."""
+    noise_estimated: bool = False
+    """The tests took the noise as estimated from the data (F, Pope's tau), not as known."""
 
     @property
     def detected(self) -> bool:
@@ -189,7 +194,7 @@ class Diagnosis:
                                   "stderr": {p: fit.stderr[p] for p in params}}
         step = next((s for s in self.steps if s.winner == name), None)
         if step is None:
-            T, dof, p = wald_test(fit, tuple(params))
+            T, dof, p = wald_test(fit, tuple(params), self.noise_estimated)
             return {**out, "p_value": p, "p_value_unadjusted": p, "statistic": T, "dof": dof,
                     "swapped_in": True}
         test = next(t for t in step.tests if t.name == name)
@@ -198,7 +203,8 @@ class Diagnosis:
 
 
 def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
-             absorbed: float = ABSORBED, confounded: float = CONFOUNDED) -> Diagnosis:
+             absorbed: float = ABSORBED, confounded: float = CONFOUNDED,
+             noise_estimated: bool = False) -> Diagnosis:
     """Detect, identify and adapt until no candidate is rejected in the detection family.
 
     See the module docstring. The base model is always fitted and its candidates analysed (for
@@ -213,6 +219,10 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     effect is added, every named effect is tested given the others (Wald, Holm at ``alpha``);
     the least significant of those that are not is dropped and the model refitted, until all
     are significant. A dropped effect is not named again.
+
+    With ``noise_estimated`` the noise the problem is whitened with is an estimate from these
+    data: the family's tests are F and Pope's tau tests, the Wald tests F tests
+    (:mod:`montecarlo.discrepancy.estimated_sigma`).
     """
     full = with_outliers(problem)
     effects_view = replace(full, candidates=problem.candidates)
@@ -227,7 +237,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     retried = False
     while True:
         tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
-                                                  power, absorbed)
+                                                  power, absorbed, noise_estimated)
         eligible = [t for t in (*tests, *snoop) if t.status == "testable"
                     and t.p_adjusted < alpha and t.name not in dropped]
         if not eligible and outliers and not retried:
@@ -286,7 +296,8 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             steps.append(Step(tested, tests, win.name, (), snoop, {}, global_p))
             continue
         named.append(win.name)
-        fit, gone = _reconsider(full, fit, [*named, *(t.name for t in outliers)], fixed, alpha)
+        fit, gone = _reconsider(full, fit, [*named, *(t.name for t in outliers)], fixed, alpha,
+                                noise_estimated)
         for name, p in gone.items():
             if is_outlier(name):
                 outliers = [t for t in outliers if t.name != name]
@@ -310,20 +321,21 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             named[named.index(out)] = into
         if swaps:  # the lists of what the final model absorbs or could miss are its own
             tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
-                                                      power, absorbed)
+                                                      power, absorbed, noise_estimated)
             steps[-1] = Step(fit, tests, None, (), snoop, {}, global_p)
     final = steps[-1]
     absorbed_list = [t.name for t in final.tests if t.status == "absorbed"
                      and t.name not in named and t.name not in dropped]
     confounded_groups = [_group_of(full, effects_view, fit, name, named, fixed, alpha, power,
-                                   absorbed, confounded) for name in named]
+                                   absorbed, confounded, noise_estimated) for name in named]
     return Diagnosis(problem, alpha, before, fit, steps, named,
                      [g.members for g in confounded_groups], absorbed_list, outliers, dropped,
-                     swaps, confounded_groups)
+                     swaps, confounded_groups, noise_estimated)
 
 
 def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresFit,
-                     alpha: float = ALPHA, power: float = POWER, absorbed: float = ABSORBED
+                     alpha: float = ALPHA, power: float = POWER, absorbed: float = ABSORBED,
+                     noise_estimated: bool = False
                      ) -> tuple[list[CandidateTest], list[CandidateTest], float]:
     """The tests of one step as one family under Holm's weighted procedure.
 
@@ -331,20 +343,26 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
     effects (no candidates: no data snooping). Members: the global test of ``fit`` and each
     effect (weight 1), the observations (weight 1 together, :func:`family_levels`). Returns
     the effects' and observations' tests with ``p_adjusted`` over the whole family and their
-    MDBs at their own first-step sizes, and the global test's adjusted p-value.
+    MDBs at their own first-step sizes, and the global test's adjusted p-value. With the
+    noise estimated, the effects' tests are F tests, the observations' Pope's tau and the
+    global test the F test against every effect at once (:func:`global_f`).
     """
-    tests = analyse_candidates(effects, fit, alpha, power, absorbed)
+    kind = ("F", "tau") if noise_estimated else ("chi2", "chi2")
+    tests = analyse_candidates(effects, fit, alpha, power, absorbed, test=kind[0])
     members = [t for t in tests if math.isfinite(t.statistic)]
     has_obs = bool(observations.candidates)
     _, obs_share = family_levels(alpha, len(members), has_obs)
     snoop = analyse_candidates(observations, fit, alpha, power, absorbed,
-                               level=lambda k: obs_share / max(k, 1)) if has_obs else []
+                               level=lambda k: obs_share / max(k, 1),
+                               test=kind[1]) if has_obs else []
     seen = [t for t in snoop if math.isfinite(t.statistic)]
     names = [t.name for t in (*members, *seen)]
     p = [t.p_value for t in (*members, *seen)]
     w = [1.0] * len(members) + [1.0 / max(len(seen), 1)] * len(seen)
-    if fit.dof > 0:
-        names, p, w = [*names, "global"], [*p, fit.p_value], [*w, 1.0]
+    global_test = fit.p_value if not noise_estimated else global_f(
+        fit.residual, [t.projected for t in members if t.projected is not None], fit.dof)[3]
+    if fit.dof > 0 and math.isfinite(global_test):
+        names, p, w = [*names, "global"], [*p, global_test], [*w, 1.0]
     if has_obs and not seen:  # the observations' share stays unspent
         names, p, w = [*names, "observations"], [*p, 1.0], [*w, 1.0]
     adjusted = dict(zip(names, weighted_holm(p, w).tolist(), strict=True)) if p else {}
@@ -359,7 +377,7 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
 
 def _group_of(problem: Problem, view: Problem, fit: LeastSquaresFit, name: str,
               named: Sequence[str], fixed: set[str], alpha: float, power: float,
-              absorbed: float, confounded: float) -> Group:
+              absorbed: float, confounded: float, noise_estimated: bool = False) -> Group:
     """The confounded group of the named effect ``name`` given the rest of the final model:
     refit without it and collect the candidates (not named) whose statistics correlate with
     its own above ``confounded`` and that the data do not separate from it."""
@@ -368,7 +386,8 @@ def _group_of(problem: Problem, view: Problem, fit: LeastSquaresFit, name: str,
                                   fit.params, fixed)
     except (FitError, np.linalg.LinAlgError):
         return Group(name, (name,))
-    tests = analyse_candidates(view, without, alpha, power, absorbed)
+    tests = analyse_candidates(view, without, alpha, power, absorbed,
+                               test="F" if noise_estimated else "chi2")
     own = next(t for t in tests if t.name == name)
     if own.status != "testable":
         return Group(name, (name,))
@@ -456,7 +475,8 @@ def _swap(problem: Problem, fit: LeastSquaresFit, named: Sequence[str],
 
 
 def _reconsider(problem: Problem, fit: LeastSquaresFit, named: Sequence[str], fixed: set[str],
-                alpha: float) -> tuple[LeastSquaresFit, dict[str, float]]:
+                alpha: float, noise_estimated: bool = False
+                ) -> tuple[LeastSquaresFit, dict[str, float]]:
     """Drop, one at a time, the least significant of the named effects and flagged
     observations while any is not significant given the others (Wald tests; Holm over the
     effects, and separately over the observations); returns the refitted model and what was
@@ -467,7 +487,8 @@ def _reconsider(problem: Problem, fit: LeastSquaresFit, named: Sequence[str], fi
         adjusted: dict[str, float] = {}
         for family in ([n for n in kept if not is_outlier(n)], [n for n in kept if is_outlier(n)]):
             if len(family) > (1 if family and not is_outlier(family[0]) else 0):
-                p = [wald_test(fit, problem.effect(n).parameters)[2] for n in family]
+                p = [wald_test(fit, problem.effect(n).parameters, noise_estimated)[2]
+                     for n in family]
                 adjusted.update(zip(family, holm(p).tolist(), strict=True))
         if not adjusted:
             break

@@ -334,6 +334,26 @@ def ground_problem(data: GroundData, camera: Camera, pixel_sigma: float,
                    observations(data), SEPARATING_DATA)
 
 
+def whitened_noise_components(data: GroundData, camera: Camera, pixel_sigma: float,
+                               survey_sigma: float,
+                               refraction: float = STANDARD_REFRACTION) -> list[FloatArray]:
+    """The pixel and survey noise's covariances (per unit variance) in the coordinates of
+    :func:`ground_problem`'s whitened residuals at ``pixel_sigma``, ``survey_sigma``:
+    ``W I W'`` and ``W J J' W'``, each (2n, 2n) block-diagonal (variance components)."""
+    start = initial_mounting(data, camera, refraction)
+    whiten = np.linalg.inv(np.linalg.cholesky(
+        pixel_covariance(data, camera, start, pixel_sigma, survey_sigma)))
+    out = []
+    for unit in (pixel_covariance(data, camera, start, 1.0, 0.0),
+                 pixel_covariance(data, camera, start, 0.0, 1.0)):
+        blocks = whiten @ unit @ np.swapaxes(whiten, 1, 2)
+        Q = np.zeros((2 * data.n, 2 * data.n))
+        for i in range(data.n):
+            Q[2 * i:2 * i + 2, 2 * i:2 * i + 2] = blocks[i]
+        out.append(Q)
+    return out
+
+
 def observations(data: GroundData) -> tuple[tuple[str, int, tuple[int, ...]], ...]:
     """Each target's image point as one observation: its name (with the session, if any, or
     the row where a name repeats), its data row (1-based) and its two whitened residuals."""

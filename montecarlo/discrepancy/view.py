@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from montecarlo.discrepancy.candidate_tests import POWER, CandidateTest, chi2_red_band
 from montecarlo.discrepancy.engine import Diagnosis
 from montecarlo.discrepancy.noise import format_noise, noise_scale
+from montecarlo.discrepancy.noise_estimation import format_components, format_estimates
 from montecarlo.discrepancy.problem import OUTLIER, is_outlier
 from montecarlo.lsq import LeastSquaresFit
 
@@ -93,17 +94,29 @@ def _outliers(d: Diagnosis, view: SystemView) -> list[dict[str, Any]]:
                     "size_unit": view.rms_unit,
                     "size_sigma": float(np.linalg.norm(list(t.estimate.values()))),
                     "p_value": t.p_adjusted, "statistic": t.statistic, "dof": t.dof,
+                    **({} if t.test == "chi2" else {"test": t.test, "dof2": t.dof2}),
                     "mdb_sigma": float(max(t.mdb.values())), "mdb_test": _mdb_test(t)})
     return out
 
 
+def test_name(t: CandidateTest | Mapping[str, Any]) -> str:
+    """The distribution of a candidate's own test: chi2(q), F(q, d) or Pope's tau(d, q)."""
+    kind, q, d = (t.test, t.dof, t.dof2) if isinstance(t, CandidateTest) else (
+        t.get("test", "chi2"), t["dof"], t.get("dof2", 0))
+    return {"chi2": f"chi2({q})", "F": f"F({q}, {d})", "tau": f"tau({d}, {q})"}[kind]
+
+
 def _mdb_test(t: CandidateTest) -> dict[str, Any] | None:
-    """The test an MDB belongs to: the candidate's own chi2(dof) test, its size (its share of
-    alpha at the first step of Holm's procedure over the detection family) and power."""
+    """The test an MDB belongs to: the candidate's own test (chi2(dof) with the noise known;
+    F or Pope's tau with it estimated), its size (its share of alpha at the first step of
+    Holm's procedure over the detection family) and power."""
     if not t.mdb:
         return None
-    return {"test": "own", "statistic": f"chi2({t.dof})", "dof": t.dof, "size": t.level,
-            "power": POWER, "lambda0": t.lambda0}
+    out = {"test": "own", "statistic": test_name(t), "dof": t.dof, "size": t.level,
+           "power": POWER, "lambda0": t.lambda0}
+    if t.test != "chi2":
+        out["sigma"] = "estimated"
+    return out
 
 
 def largest_residuals(d: Diagnosis, view: SystemView, k: int = 5) -> list[dict[str, Any]]:
@@ -164,6 +177,8 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
         r = d.effect_result(name)
         step = next((s for s in d.steps if s.winner == name), None)
         test = None if step is None else next(t for t in step.tests if t.name == name)
+        if test is not None and test.test != "chi2":
+            r = {**r, "test": test.test, "dof2": test.dof2}
         named.append({**r, "parameters": _show(view, r["parameters"]),
                       "stderr": _show(view, r["stderr"]),
                       "units": {k: view.display_unit(k)[0] for k in r["parameters"]},
@@ -171,6 +186,7 @@ def to_json(d: Diagnosis, view: SystemView, source: str) -> dict[str, Any]:
 
     def candidate(t: CandidateTest) -> dict[str, Any]:
         return {"name": t.name, "status": t.status, "statistic": t.statistic, "dof": t.dof,
+                **({} if t.test == "chi2" else {"test": t.test, "dof2": t.dof2}),
                 "p_value": t.p_value, "p_adjusted": t.p_adjusted,
                 "mdb": _show(view, t.mdb), "units": {k: view.unit(k)[0] for k in t.mdb},
                 "influence": {k: v / view.small(k)[1] for k, v in t.influence.items()
@@ -230,6 +246,16 @@ def _why_dropped(e: Mapping[str, Any]) -> str:
     return "its adapted model is singular with these data: not fitted"
 
 
+FEW_DOF = 10
+"""Below this many degrees of freedom left to estimate the noise beside a candidate, its F
+test under ``auto`` is weak (the F(q, d) critical value grows fast as d falls)."""
+
+
+def d_estimated(report: Mapping[str, Any]) -> bool:
+    """The diagnosis took the noise as estimated from the data."""
+    return bool(report.get("noise_estimate"))
+
+
 def format_text(report: Mapping[str, Any]) -> str:
     """Human-readable summary of :func:`to_json`."""
     g, unit = report["gap"], report["rms_unit"]
@@ -249,8 +275,12 @@ def format_text(report: Mapping[str, Any]) -> str:
                            for k, v in e["parameters"].items())
         how = "Wald test in the final model, swapped in at the end" if e.get("swapped_in") \
             else "Holm"
+        stat = (f"T = {e['statistic']:.1f} on {e['dof']} dof" if e.get("test", "chi2") == "chi2"
+                else f"{test_name(e)} = {e['statistic']:.1f}")
+        if e.get("swapped_in") and d_estimated(report):
+            stat = f"F({e['dof']}, {report['gap']['after']['dof']}) = {e['statistic']:.1f}"
         lines.append(f"named: {e['name']} ({values}); identification p = "
-                     f"{_p(e['p_value'])} ({how}), T = {e['statistic']:.1f} on {e['dof']} dof")
+                     f"{_p(e['p_value'])} ({how}), {stat}")
     for g in report.get("groups", []):
         values = ", ".join(f"{k} = {v:.4g} ± {g['stderr'][k]:.2g}{_unit(g['units'][k])}"
                            for k, v in g["parameters"].items())
@@ -274,12 +304,27 @@ def format_text(report: Mapping[str, Any]) -> str:
     if report["absorbed"]:
         lines.append(f"absorbed by the model (never named): {', '.join(report['absorbed'])}")
     if report["detected"]:
+        test = ("the noise estimated from it" if d_estimated(report)
+                else f"p = {a['p_value']:.3g}")
         lines.append(f"adapted model: chi2_red = {a['chi2_red']:.3f} (dof {a['dof']}), "
-                     f"p = {a['p_value']:.3g}, rms = {a['rms']:.4g} {unit}")
-    if "noise_scale" in report:
-        stated = {k.replace("_", " "): v for k, v in physics.items()
-                  if "sigma" in k and isinstance(v, int | float) and not isinstance(v, bool)}
+                     f"{test}, rms = {a['rms']:.4g} {unit}")
+    if report.get("noise_estimate"):
+        lines.append(format_estimates(report["noise_estimate"]["estimates"],
+                                      report["noise_estimate"]["used"]))
+        weak = [f"{c['name']} {test_name(c)}" for c in report["candidates"]
+                if c["status"] == "testable" and c.get("test") == "F"
+                and c["dof2"] < FEW_DOF]
+        if weak:
+            lines.append("warning: with the noise estimated, fewer than "
+                         f"{FEW_DOF} degrees of freedom are left beside " + ", ".join(weak)
+                         + ": their tests have little power; state the noise if it is known")
+    elif "noise_scale" in report:
+        stated = report.get("stated_noise") or {
+            k.replace("_", " "): v for k, v in physics.items()
+            if "sigma" in k and isinstance(v, int | float) and not isinstance(v, bool)}
         lines.append(format_noise(report["noise_scale"], stated))
+        if report.get("noise_components"):
+            lines.append(format_components(report["noise_components"]))
     if report["unexplained"]:
         lines.append("a misfit remains that no candidate explains; the largest standardised "
                      "residuals are at:")
@@ -288,12 +333,13 @@ def format_text(report: Mapping[str, Any]) -> str:
             lines.append(f"  {r['id']} (row {r['observation']}): {r['standardised']:.1f} "
                          f"sigma; {where}")
     lines.append("")
-    lines.append(f"{'candidate (base model)':<24} {'status':<12} {'T':>9} {'dof':>3} "
+    lines.append(f"{'candidate (base model)':<24} {'status':<12} "
+                 f"{'F' if d_estimated(report) else 'T':>9} {'dof':>3} "
                  f"{'p (Holm)':>9}  MDB (its own test at size a, power {POWER:g})")
     for c in report["candidates"]:
         mdb = ", ".join(f"{k} {v:.3g}{_unit(c['units'][k])}" for k, v in c["mdb"].items())
         if c.get("mdb_test"):
-            mdb += f" (chi2({c['dof']}), a = {c['mdb_test']['size']:.3g})"
+            mdb += f" ({test_name(c)}, a = {c['mdb_test']['size']:.3g})"
         stat = f"{c['statistic']:9.2f}" if math.isfinite(c["statistic"]) else f"{'-':>9}"
         p = f"{c['p_adjusted']:9.3g}" if math.isfinite(c["p_adjusted"]) else f"{'-':>9}"
         lines.append(f"{c['name']:<24} {c['status']:<12} {stat} {c['dof']:>3} {p}  "
@@ -308,7 +354,7 @@ def format_text(report: Mapping[str, Any]) -> str:
             continue
         mdb = ", ".join(f"{k} {v:.3g}{_unit(c['units'][k])}" for k, v in c["mdb"].items())
         if c.get("mdb_test"):
-            mdb += f" (chi2({c['dof']}), a = {c['mdb_test']['size']:.3g})"
+            mdb += f" ({test_name(c)}, a = {c['mdb_test']['size']:.3g})"
         worst = sorted(c["influence"].items(), key=lambda kv: -abs(kv[1]))[:3]
         shift = ", ".join(f"{k} {v:.3g}{_unit(c['influence_units'][k])}" for k, v in worst)
         lines.append(f"  {c['name']:<24} MDB {mdb}; shifts {shift}")
