@@ -54,7 +54,9 @@ def _git(*args: str) -> str:
 
 
 _COMMIT = _git("rev-parse", "HEAD")  # the commit the suite started on
-_MODIFIED = bool(_git("status", "--porcelain", "--untracked-files=no"))
+# tracked files that differ from the commit, the records of earlier suites left out
+_MODIFIED = bool(_git("status", "--porcelain", "--untracked-files=no", "--", ".",
+                      ":(exclude)results/acceptance"))
 
 
 def pytest_sessionfinish(session, exitstatus):
