@@ -36,7 +36,7 @@ the batch size.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -46,9 +46,13 @@ from scipy import special
 from montecarlo.discrepancy.candidate_tests import (
     ABSORBED,
     ALPHA,
+    CONFOUNDED,
     POWER,
+    CandidateTest,
+    _orthonormal,
     log_chi2_sf_asymptotic,
 )
+from montecarlo.discrepancy.confounding import contained
 from montecarlo.discrepancy.engine import detection_family
 from montecarlo.discrepancy.fit import jacobian
 from montecarlo.discrepancy.problem import Problem, with_outliers
@@ -62,6 +66,20 @@ BLOCK = 1000
 
 
 @dataclass(frozen=True)
+class StandIn:
+    """A smaller candidate that may be named instead of a winner (the engine's
+    :func:`~montecarlo.discrepancy.confounding.minimal_member`): ``inner``'s columns lie nearly
+    inside ``winner``'s; fitted alone or with one other candidate (``extras``, in the engine's
+    order: (parameters added, index of the quadratic form of the winner's columns left
+    unexplained, -1 where nothing is left)) it explains the winner's signal when that form's
+    chi2 tail is at least ``alpha``."""
+
+    winner: int
+    inner: int
+    extras: tuple[tuple[int, int], ...]
+
+
+@dataclass(frozen=True)
 class FirstStep:
     """The detection family of the first identification step at a linearisation point.
 
@@ -70,8 +88,13 @@ class FirstStep:
     names : members other than the global test: candidate effects, then observations.
     dof, weights : each member's degrees of freedom and Holm weight (global test last).
     eligible : members that can be named (status ``testable``).
-    projector : (n, r + c) ``[B | U_1 | ... | U_k]``: the complement of the model's columns,
-        then each member's orthonormal basis; ``starts`` the first column of each member.
+    projector : (n, r + c) ``[B | U_1 | ... | U_k | V_1 | ...]``: the complement of the
+        model's columns, each member's orthonormal basis, then the bases ``V`` of the
+        :class:`StandIn` forms.
+    summing : (r + c, k + 1 + f) 0/1: which squared projections add up to each statistic
+        (the members', the global test's, the forms').
+    extra_dof : degrees of freedom of each ``V``.
+    stand_ins : the :class:`StandIn` of each winner that has any.
     spare : weight of the observations' share when no observation is tested (p = 1).
     alpha : the family-wise level.
     """
@@ -81,7 +104,9 @@ class FirstStep:
     weights: FloatArray
     eligible: NDArray[np.bool_]
     projector: FloatArray
-    starts: IntArray
+    summing: FloatArray
+    extra_dof: IntArray
+    stand_ins: tuple[StandIn, ...]
     spare: float
     alpha: float
 
@@ -92,7 +117,8 @@ class FirstStep:
 
 
 def first_step(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
-               power: float = POWER, absorbed: float = ABSORBED) -> FirstStep:
+               power: float = POWER, absorbed: float = ABSORBED,
+               confounded: float = CONFOUNDED) -> FirstStep:
     """The engine's detection family at ``fit`` (the linearisation point: the model there,
     e.g. noise-free data of a design with its effects present) as :class:`FirstStep`."""
     full = with_outliers(problem)
@@ -106,17 +132,57 @@ def first_step(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
     u, s, _ = np.linalg.svd(fit.jacobian, full_matrices=True)
     rank = int(np.sum(s > 1e-12 * s[0]))
     complement = u[:, rank:]
-    bases = [t.basis for t in (*members, *seen)]
-    dof = [b.shape[1] for b in bases]  # type: ignore[union-attr]
+    bases = [t.basis for t in (*members, *seen) if t.basis is not None]
+    stand_ins, forms = _stand_ins(members, [t for t in tests if t.status == "testable"],
+                                  absorbed, confounded)
+    dof = [b.shape[1] for b in (*bases, *forms)]
+    r = complement.shape[1]
+    group = np.repeat([len(bases), *range(len(bases)), *range(len(bases) + 1, len(dof) + 1)],
+                      [r, *dof])  # each column's statistic: the global test after the members
+    summing = (group[:, None] == np.arange(len(dof) + 1)).astype(float)
     return FirstStep(
         tuple(t.name for t in (*members, *seen)),
-        np.array([*dof, complement.shape[1]], np.int64),
+        np.array([*dof[:len(bases)], complement.shape[1]], np.int64),
         np.array([1.0] * len(members) + [1.0 / max(len(seen), 1)] * len(seen) + [1.0]),
         np.array([t.status == "testable" for t in (*members, *seen)], bool),
-        np.column_stack([complement, *bases]),
-        complement.shape[1] + np.concatenate([[0], np.cumsum(dof)[:-1]]).astype(np.int64),
+        np.column_stack([complement, *bases, *forms]), summing,
+        np.array(dof[len(bases):], np.int64), tuple(stand_ins),
         1.0 if observations.candidates and not seen else 0.0,
         alpha)
+
+
+def _stand_ins(members: Sequence[CandidateTest], others: Sequence[CandidateTest],
+               absorbed: float, confounded: float
+               ) -> tuple[list[StandIn], list[FloatArray]]:
+    """Every (winner, inner, extra) of :func:`~montecarlo.discrepancy.confounding.minimal_member`
+    that the design allows, and the bases of the quadratic forms that decide them (the
+    winner's projected columns orthogonal to inner's and extra's), in order."""
+    out: list[StandIn] = []
+    forms: list[FloatArray] = []
+    for w, winner in enumerate(members):
+        if winner.status != "testable" or winner.projected is None:
+            continue
+        for i, inner in enumerate(members):
+            if inner.name == winner.name or inner.status != "testable" \
+                    or inner.dof >= winner.dof or not contained(inner, winner, confounded):
+                continue
+            extras = []
+            for extra in (None, *others):
+                if extra is not None and (extra.name in (winner.name, inner.name)
+                                          or inner.dof + extra.dof >= winner.dof):
+                    continue
+                columns = [c.projected for c in (inner, extra)
+                           if c is not None and c.projected is not None]
+                U = _orthonormal(np.column_stack(columns))
+                W = winner.projected - U @ (U.T @ winner.projected)
+                added = inner.dof + (0 if extra is None else extra.dof)
+                if np.linalg.norm(W) < absorbed * np.linalg.norm(winner.projected):
+                    extras.append((added, -1))
+                    break  # explains in every set: later extras are never reached
+                forms.append(_orthonormal(W))
+                extras.append((added, len(forms) - 1))
+            out.append(StandIn(w, i, tuple(extras)))
+    return out, forms
 
 
 def signal(problem: Problem, fit: LeastSquaresFit, values: Mapping[str, float]) -> FloatArray:
@@ -140,12 +206,9 @@ def whitened_noise(seed: int, start: int, stop: int, n: int) -> FloatArray:
 
 
 def member_statistics(step: FirstStep, projected: FloatArray) -> FloatArray:
-    """Statistics (N, k + 1) of each member, global test last, from ``projected`` (N, r + c),
-    the data times :attr:`FirstStep.projector`."""
-    squares = projected**2
-    own = np.add.reduceat(squares, step.starts, axis=1) if step.starts.size else \
-        np.zeros((projected.shape[0], 0))
-    return np.column_stack([own, squares[:, :step.r].sum(axis=1)])
+    """Statistics (N, k + 1 + f) of each member, the global test, then the stand-ins'
+    forms, from ``projected`` (N, r + c), the data times :attr:`FirstStep.projector`."""
+    return (projected**2) @ step.summing
 
 
 def log_chi2_sf_rows(statistics: FloatArray, dof: IntArray) -> FloatArray:
@@ -193,9 +256,13 @@ def first_step_winners(step: FirstStep, statistics: FloatArray) -> IntArray:
     The engine's rule: Holm's weighted procedure over the family at ``alpha``; among the
     rejected testable members, the smallest p-value (``log_p``: the chi2 tail, asymptotic
     beyond scipy's range, :func:`~montecarlo.discrepancy.candidate_tests.log_chi2_sf`), then
-    the fewest degrees of freedom, then the first in order.
+    the fewest degrees of freedom, then the first in order; then the minimal member of its
+    confounded group where one explains its signal (:func:`_apply_stand_ins`).
     """
-    log_p = log_chi2_sf_rows(statistics, step.dof)
+    if not step.names:
+        return np.full(statistics.shape[0], -1, np.int64)
+    k = len(step.names)
+    log_p = log_chi2_sf_rows(statistics[:, :k + 1], step.dof)
     p = np.exp(log_p)
     weights = step.weights
     if step.spare:
@@ -207,7 +274,39 @@ def first_step_winners(step: FirstStep, statistics: FloatArray) -> IntArray:
     best = key.min(axis=1, initial=np.inf)
     tied = ok & (key == best[:, None])
     winner = np.argmin(np.where(tied, step.dof[:-1], np.iinfo(np.int64).max), axis=1)
-    return np.where(tied.any(axis=1), winner, -1)
+    winner = np.where(tied.any(axis=1), winner, -1)
+    return _apply_stand_ins(step, winner, ok, log_p, statistics[:, k + 1:])
+
+
+def _apply_stand_ins(step: FirstStep, winner: IntArray, ok: NDArray[np.bool_],
+                     log_p: FloatArray, forms: FloatArray) -> IntArray:
+    """The engine's :func:`~montecarlo.discrepancy.confounding.minimal_member` on each set:
+    the rejected stand-in of the winner that explains its signal with the fewest parameters
+    (alone, or with the first extra candidate in order that does: the winner's columns left
+    insignificant at ``alpha``, ``forms`` the statistics of what they leave), then the
+    smallest p-value, then the first in order, named instead of the winner."""
+    out = winner.copy()
+    for w in sorted({s.winner for s in step.stand_ins}):
+        rows = np.flatnonzero(winner == w)
+        if not rows.size:
+            continue
+        explained = log_chi2_sf_rows(forms[rows], step.extra_dof) >= math.log(step.alpha)
+        best = np.full(rows.size, -1)
+        best_dof = np.full(rows.size, np.inf)
+        best_log_p = np.full(rows.size, np.inf)
+        for s in (x for x in step.stand_ins if x.winner == w):
+            added = np.full(rows.size, np.inf)
+            for dof, form in reversed(s.extras):  # the first extra that explains counts
+                hit = np.ones(rows.size, bool) if form < 0 else explained[:, form]
+                added = np.where(hit, float(dof), added)
+            lp = log_p[rows, s.inner]
+            better = ok[rows, s.inner] & np.isfinite(added) & (
+                (added < best_dof) | ((added == best_dof) & (lp < best_log_p)))
+            best = np.where(better, s.inner, best)
+            best_dof = np.where(better, added, best_dof)
+            best_log_p = np.where(better, lp, best_log_p)
+        out[rows] = np.where(best >= 0, best, w)
+    return out
 
 
 class LinearRates:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from montecarlo.discrepancy.candidate_tests import ALPHA
@@ -218,6 +219,10 @@ def _named(rates: LinearRates, lin: LinearDesign, shift: FloatArray) -> float:
     return rates.pci(lin.effect, shift) if lin.effect in lin.step.names else 0.0
 
 
+def _at_multiple(rates: LinearRates, lin: LinearDesign, multiple: float) -> float:
+    return _named(rates, lin, lin.signal(multiple))
+
+
 def linear_mib_multiple(system: str, design: Mapping[str, Any], effect: str,
                         target: float = PCI_TARGET, sets: int = 10_000, seed: int = 0,
                         tol: float = 0.02, batch: int = 5000, parameters: Sequence[str] = ()
@@ -225,7 +230,7 @@ def linear_mib_multiple(system: str, design: Mapping[str, Any], effect: str,
     """:func:`mib_multiple` on the linearised first step (:func:`linear_pci`)."""
     lin = linear_design(system, design, effect, parameters)
     rates = LinearRates(lin.step, sets, seed, batch)
-    return search_mib(lambda m: _named(rates, lin, lin.signal(m)), target, tol)
+    return search_mib(partial(_at_multiple, rates, lin), target, tol)
 
 
 SEARCH = ("bisection on the multiple of the MDB, common random numbers, relative width 0.02, "
@@ -237,7 +242,8 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
              check_sets: int = 0, batch: int = 5000) -> dict[str, Any]:
     """Add ``pci``, ``pci_size``, ``mib``, ``mib_mdb`` to each testable base-model candidate of
     a diagnosis's JSON ``report`` (:func:`montecarlo.discrepancy.view.to_json`), on the data's
-    own design: its layout, noise and final model (``view.study_params(d.after)``).
+    own design: its layout, noise and final model (``view.study_params(d.after)``), at the
+    diagnosis's ``alpha``.
 
     The numbers are the linearised first step's (``mode: "linear"``, :func:`linear_pci` on
     ``sets`` sets). ``pci`` is at the fitted size for a named effect (``pci_size``
@@ -253,7 +259,7 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
     ``check_sets`` sets, through the study runner) checks each candidate at its ``pci_size``
     and at its linear MIB: ``check: {mode: "nonlinear", sets, pci, pci_at_mib}``.
     """
-    design = view.study_params(d.after)
+    design = {**view.study_params(d.after), "alpha": d.alpha}  # the diagnosis's own alpha
     system = view.study_system
     noise: dict[tuple, LinearRates] = {}
     for c in report["candidates"]:
@@ -271,9 +277,10 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
             c.update(pci=None, mib=None, mib_mdb=None, identifiability_reason=str(exc))
             continue
         key = (lin.step.names, tuple(lin.fit.params.items()))
-        rates = noise.setdefault(key, LinearRates(lin.step, sets, seed, batch))
-        m, _ = search_mib(lambda x, lin=lin, rates=rates: _named(rates, lin, lin.signal(x)),
-                          target)
+        if key not in noise:  # candidates tested against the same model share the noise
+            noise[key] = LinearRates(lin.step, sets, seed, batch)
+        rates = noise[key]
+        m, _ = search_mib(partial(_at_multiple, rates, lin), target)
         c["pci"] = _named(rates, lin, lin.signal(size))
         after = next((a for a in report.get("candidates_after", ())
                       if a["name"] == name and a["status"] == "testable" and a["mdb"]), None)
