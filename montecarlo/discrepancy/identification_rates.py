@@ -236,16 +236,17 @@ def log_chi2_sf_rows(statistics: FloatArray, dof: IntArray) -> FloatArray:
     return out
 
 
-def weighted_holm_rows(p: FloatArray, weights: FloatArray) -> FloatArray:
-    """:func:`montecarlo.discrepancy.candidate_tests.weighted_holm` of each row of ``p``
-    (N, k) with the same ``weights`` (k,): the same arithmetic, along the rows."""
+def holm_rejections(p: FloatArray, weights: FloatArray, alpha: float) -> NDArray[np.bool_]:
+    """Where :func:`montecarlo.discrepancy.candidate_tests.weighted_holm`'s adjusted p-value of
+    each row of ``p`` (N, k), with the same ``weights`` (k,), is below ``alpha`` (< 1): the
+    same arithmetic along the rows, the step-down stopped at the first member not rejected
+    (an adjusted p-value is the running maximum of ``p_(i) W_i / w_(i)``)."""
     order = np.argsort(p / weights, axis=1, kind="stable")
     w = weights[order]
     left = np.cumsum(w[:, ::-1], axis=1)[:, ::-1]
-    stepped = np.minimum(1.0, np.maximum.accumulate(
-        np.take_along_axis(p, order, axis=1) * left / w, axis=1))
+    stepped = np.take_along_axis(p, order, axis=1) * left / w < alpha
     out = np.empty_like(stepped)
-    np.put_along_axis(out, order, stepped, axis=1)
+    np.put_along_axis(out, order, np.logical_and.accumulate(stepped, axis=1), axis=1)
     return out
 
 
@@ -268,8 +269,7 @@ def first_step_winners(step: FirstStep, statistics: FloatArray) -> IntArray:
     if step.spare:
         p = np.column_stack([p, np.ones(p.shape[0])])
         weights = np.append(weights, step.spare)
-    adjusted = weighted_holm_rows(p, weights)[:, :len(step.names)]
-    ok = step.eligible & (adjusted < step.alpha)
+    ok = step.eligible & holm_rejections(p, weights, step.alpha)[:, :k]
     key = np.where(ok, log_p[:, :len(step.names)], np.inf)
     best = key.min(axis=1, initial=np.inf)
     tied = ok & (key == best[:, None])

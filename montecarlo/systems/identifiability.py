@@ -280,8 +280,9 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
         if key not in noise:  # candidates tested against the same model share the noise
             noise[key] = LinearRates(lin.step, sets, seed, batch)
         rates = noise[key]
-        m, _ = search_mib(partial(_at_multiple, rates, lin), target)
-        c["pci"] = _named(rates, lin, lin.signal(size))
+        m, seen = search_mib(partial(_at_multiple, rates, lin), target)
+        c["pci"] = seen[size] if isinstance(size, float) and size in seen else \
+            _named(rates, lin, lin.signal(size))
         after = next((a for a in report.get("candidates_after", ())
                       if a["name"] == name and a["status"] == "testable" and a["mdb"]), None)
         reference = c["mdb"] if after is None else after["mdb"]
