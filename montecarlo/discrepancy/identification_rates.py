@@ -18,15 +18,19 @@ and every statistic of the first step is a quadratic form of them:
 step-down procedure over the global test, each candidate effect (weight 1) and the
 observations (weight 1 together), a member rejected where its adjusted p-value is below
 ``alpha``; the winner is the rejected *testable* member with the smallest p-value (fewer
-degrees of freedom on a tie), so an absorbed or undetectable candidate
-is never named. The bases, degrees of freedom, weights and statuses are the engine's
+degrees of freedom on a tie), so an absorbed or undetectable candidate is never named; a
+smaller candidate inside the winner's columns that explains its signal, alone or with one
+other, is named instead (the engine's
+:func:`~montecarlo.discrepancy.confounding.minimal_member`, its tests quadratic forms of the
+misclosures too). The bases, degrees of freedom, weights and statuses are the engine's
 (:func:`~montecarlo.discrepancy.engine.detection_family` at the noise-free fit of the design);
 only the per-set statistics are computed here, for a batch of sets by one matrix product.
 
-Not reproduced: the refinements the engine applies after choosing its winner (an effect that
-explains a flagged observation's signal, the minimal member of a confounded group) and the
-later steps (adapting the winner, testing again). The nonlinear Monte Carlo of the full
-diagnosis (:mod:`montecarlo.systems.identifiability`) is the check of this approximation.
+Not reproduced: an effect that explains a flagged observation's signal, adapted before the
+observation (:func:`~montecarlo.discrepancy.confounding.effect_for_observation`), and the
+later steps (adapting the winner, testing again, the swaps). The nonlinear Monte Carlo of the
+whole diagnosis (:mod:`montecarlo.systems.identifiability`) is the check of this
+approximation.
 
 Reproducible: the noise of set ``i`` comes from block ``i // BLOCK`` of ``SeedSequence(seed)``
 (spawn key = block index), so the same seed gives the same sets, and the same PCI, whatever

@@ -1,21 +1,28 @@
-"""Identifiability beside detectability: PCI and MIB by Monte Carlo through the study runner.
+"""Identifiability beside detectability: PCI and MIB of a diagnosis's candidates.
 
-The minimal detectable bias (MDB) of a candidate says how large its effect must be for the
-global test to *detect* a misfit (power 0.8). With several candidates, the size at which the
-diagnosis *names the right one* is larger: the probability of correct identification (PCI) at
-a size, and the minimal identifiable bias (MIB), the size at which the PCI reaches a target
+The minimal detectable bias (MDB) of a candidate says how large its effect must be for its own
+test to *detect* it (power 0.8). With several candidates, the size at which the diagnosis
+*names the right one* is larger: the probability of correct identification (PCI) at a size,
+and the minimal identifiable bias (MIB), the size at which the PCI reaches a target
 (Imparato, Teunissen & Tiberius, Survey Review 2019).
 
-Both are estimated by simulation on a design: data sets of the study system
-(``discrepancy_ground``, ``discrepancy_collimation``) are drawn from the design's model with
-the candidate's effect at a size (``inject_mdb`` times its design MDB along its default
-direction, given the other effects present, or at stated parameter values) and diagnosed by
-the DIA engine; the PCI is the share of sets in which the candidate is among the named effects
-(``named_expected``). Every evaluation is one :func:`montecarlo.engine.runner.run_study` with
-the same seed, so every size sees the same noise (common random numbers): the simulated PCI
-is then a monotone step function of the size in nearly every set, and the MIB is searched by
-bisection on the multiple of the MDB (geometric midpoints, to a relative width ``tol``), then
-interpolated in log(multiple) between the bracket's ends.
+Two estimates, on a design (a study system's parameters: layout, noise, the effects present):
+
+- **linear** (:func:`linear_pci`, :func:`linear_mib_multiple`; the numbers ``diagnose
+  --identifiability`` reports): the first step of the diagnosis on the linearised model,
+  simulated whitened misclosures, thousands of sets a second
+  (:mod:`montecarlo.discrepancy.identification_rates`);
+- **nonlinear** (:func:`pci`, :func:`mib_multiple`; its check, ``--check-sets``): data sets of
+  the study system (``discrepancy_ground``, ``discrepancy_collimation``) drawn from the
+  design's model with the candidate's effect at a size (``inject_mdb`` times its design MDB
+  along its default direction, given the other effects present, or at stated parameter
+  values) and diagnosed by the whole DIA engine through
+  :func:`montecarlo.engine.runner.run_study`; the PCI is the share of sets in which the
+  candidate is among the named effects (``named_expected``).
+
+Every evaluation uses the same seed, so every size sees the same noise (common random
+numbers): the simulated PCI is then a monotone step function of the size in nearly every set,
+and the MIB is searched by bisection on the multiple of the MDB (:func:`search_mib`).
 """
 
 from __future__ import annotations
