@@ -60,7 +60,10 @@ START_IMAGE_NOISE = 0.1
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    """Refuse, before any work, a --report directory or --json file that cannot be written."""
+    """Refuse, before any work, a --report directory or --json file that cannot be written,
+    and --check-sets without --identifiability."""
+    if getattr(args, "check_sets", 0) and not args.identifiability:
+        raise InputError("--check-sets: only with --identifiability")
     if args.report:
         OutputDir(args.report, "diagnose", inputs=(Path(args.data),)).check()
     check_json_option(args)
@@ -84,8 +87,11 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
     if getattr(args, "identifiability", False):
         from montecarlo.systems import identifiability
 
-        identifiability.annotate(report, d, view, args.pci_target, args.sets, args.seed,
-                                 args.n_jobs)
+        with steps("the identifiability", f"{args.sets} linearised sets per size"
+                   + (f", {args.check_sets} nonlinear diagnoses per size and candidate "
+                      "(--check-sets)" if args.check_sets else "")):
+            identifiability.annotate(report, d, view, args.pci_target, args.sets, args.seed,
+                                     args.n_jobs, args.check_sets)
     if args.report:
         from montecarlo.output.diagnosis import (  # matplotlib: only for reports
             write_html_report,
@@ -470,12 +476,18 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         p.add_argument("--seed", type=nonnegative_int, default=0,
                        help="seed of the --report and --identifiability Monte Carlo (default 0)")
         p.add_argument("--identifiability", action="store_true",
-                       help="also the PCI and the MIB of each candidate, by Monte Carlo on "
-                       "the data's design (costly: about 10 x --sets diagnoses a candidate)")
+                       help="also the PCI and the MIB of each candidate, by Monte Carlo of "
+                       "the linearised first step on the data's design (seconds)")
         p.add_argument("--pci-target", type=probability, default=0.8,
                        help="PCI at which the MIB is stated (default 0.8)")
-        p.add_argument("--sets", type=positive_int, default=100,
-                       help="simulated data sets per size for --identifiability (default 100)")
+        p.add_argument("--sets", type=positive_int, default=10_000,
+                       help="simulated whitened misclosure vectors per size for "
+                       "--identifiability (default 10000)")
+        p.add_argument("--check-sets", type=nonnegative_int, default=0, metavar="N",
+                       help="with --identifiability: also the nonlinear Monte Carlo (the "
+                       "whole diagnosis of N simulated data sets per size) at each "
+                       "candidate's PCI size and linear MIB, as a check (default 0: none; "
+                       "costly: 2 N diagnoses a candidate)")
         add_n_jobs_option(p)
 
     p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,7 @@ from montecarlo.discrepancy import procedure_effects as pe
 from montecarlo.discrepancy.candidate_tests import ALPHA
 from montecarlo.discrepancy.design import TRIAL_METRICS, inject_at_mdb, score_trials
 from montecarlo.discrepancy.engine import Diagnosis
+from montecarlo.discrepancy.problem import Problem
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.engine.system import Metric
@@ -103,13 +104,7 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
     if unknown:
         raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
     p = {**GROUND_DEFAULTS, **params}
-    camera = Camera(float(p["fov_yaw"]), float(p["fov_pitch"]), float(p["n_x"]),
-                    float(p["n_z"]))
-    truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", *ge.TRUTH_KEYS)}
-    if p["extra_truth"]:
-        truth.update({k: float(v) for k, v in json.loads(str(p["extra_truth"])).items()})
-    layout = (default_layout(camera, truth) if not p["layout"]
-              else GroundData.from_layout(str(p["layout"])))
+    camera, layout, truth = _ground_design(p)
     sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
     k_std = float(p["refraction_k"])
     alpha = float(p["alpha"])
@@ -134,6 +129,18 @@ def run_ground_trials(params: Mapping[str, float | int | str], rng: np.random.Ge
             ge.raw_residuals(data, camera, fit.params, k_std) ** 2))),
         truth, effects, int(p["diagnose"]), expected, alpha, rng, n,
         watched=("refraction",), spoil=spoil if count else None)
+
+
+def _ground_design(p: Mapping[str, Any]) -> tuple[Camera, GroundData, dict[str, float]]:
+    """Camera, target layout and truth (before any injection) of ground parameters ``p``."""
+    camera = Camera(float(p["fov_yaw"]), float(p["fov_pitch"]), float(p["n_x"]),
+                    float(p["n_z"]))
+    truth = {k: float(p[k]) for k in ("psi", "theta", "gamma", *ge.TRUTH_KEYS)}
+    if p["extra_truth"]:
+        truth.update({k: float(v) for k, v in json.loads(str(p["extra_truth"])).items()})
+    layout = (default_layout(camera, truth) if not p["layout"]
+              else GroundData.from_layout(str(p["layout"])))
+    return camera, layout, truth
 
 
 def _inject(exact: Any, truth: dict[str, float], p: Mapping[str, Any]) -> dict[str, float]:
@@ -243,13 +250,7 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
         return _procedure_trials(p, rng, n)
     if p["readings"] != "absolute":
         raise ValueError(f"readings must be 'reference' or 'absolute', not {p['readings']!r}")
-    layout = (ce.paper_mirrors(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
-                            float(p["pitch_span"]))
-              if not p["layout"] else MirrorData.from_layout(str(p["layout"])))
-    ins = float(p["ins_sigma"])
-    noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
-    sigma = math.hypot(noise.theodolite, ins)
-    truth = {k: float(p[k]) for k in ("frame_heading", *ce.TRUTH_KEYS)}
+    layout, noise, sigma, truth = _collimation_design(p)
     alpha = float(p["alpha"])
     expected = str(p["expected"])
     effects = tuple(e.strip() for e in str(p["fit_effects"]).split(",") if e.strip())
@@ -274,18 +275,60 @@ def run_collimation_trials(params: Mapping[str, float | int | str],
         watched=("theodolite_collimation",), spoil=spoil if count else None)
 
 
-def _procedure_trials(p: Mapping[str, Any], rng: np.random.Generator, n: int
-                      ) -> dict[str, FloatArray]:
-    """:func:`run_collimation_trials` under ``readings = "reference"``."""
+def _collimation_design(p: Mapping[str, Any]) -> tuple[MirrorData, Noise, float, dict[str, float]]:
+    """Mirror layout, noise, the sigma the diagnosis is told [rad] and truth (before any
+    injection) of collimation parameters ``p`` under absolute readings."""
+    layout = (ce.paper_mirrors(int(p["n_azimuth"]), int(p["n_pitch"]), float(p["azimuth_span"]),
+                            float(p["pitch_span"]))
+              if not p["layout"] else MirrorData.from_layout(str(p["layout"])))
+    ins = float(p["ins_sigma"])
+    noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
+    truth = {k: float(p[k]) for k in ("frame_heading", *ce.TRUTH_KEYS)}
+    return layout, noise, math.hypot(noise.theodolite, ins), truth
+
+
+def _procedure_design(p: Mapping[str, Any]
+                      ) -> tuple[MirrorData, Noise, float, dict[str, float], dict[str, float]]:
+    """Layout, noise, told sigma [rad], truth (before any injection) and the unrecorded rolls
+    of collimation parameters ``p`` under reference readings (seed 003's procedure)."""
     side = float(p["roll_mirror"])
     layout = (pe.paper_layout(side=side) if not p["layout"]
               else MirrorData.from_layout(str(p["layout"])))
     ins = float(p["ins_sigma"])
     noise = Noise(float(p["theodolite_sigma"]), ins, ins, ins, float(p["mount_roll_sigma"]))
-    sigma = math.hypot(noise.theodolite, ins)
     truth = {k: float(p[k]) for k in ("axis_az", "axis_el", "reference_az", *pe.TRUTH_KEYS)}
     rolls = _rolls(str(p["ins_roll"]), layout)
-    truth.update(rolls)
+    return layout, noise, math.hypot(noise.theodolite, ins), {**truth, **rolls}, rolls
+
+
+def exact_design(system: str, params: Mapping[str, Any]
+                 ) -> tuple[Callable[[Mapping[str, float]], Problem], dict[str, float]]:
+    """The design of a study system's ``run_trials`` parameters, as the MDB injection sees it.
+
+    Returns ``exact(truth)``, the problem of noise-free data of the design generated by a
+    truth, and the parameters' truth before any injection (SI): the linearisation point of
+    :mod:`montecarlo.discrepancy.identification_rates`.
+    """
+    if system == GROUND.name:
+        p = {**GROUND_DEFAULTS, **params}
+        camera, layout, truth = _ground_design(p)
+        sigma, survey = float(p["pixel_sigma"]), float(p["survey_sigma"])
+        k_std = float(p["refraction_k"])
+        return (lambda tr: ge.exact_problem(layout, camera, tr, sigma, survey, k_std)), truth
+    p = {**COLLIMATION_DEFAULTS, **params}
+    if p["readings"] == "reference":
+        layout, _, sigma, truth, _ = _procedure_design(p)
+        side, prior = float(p["roll_mirror"]), float(p["roll_prior"])
+        return (lambda tr: pe.exact_problem(layout, tr, sigma, side, prior)), truth
+    layout, _, sigma, truth = _collimation_design(p)
+    return (lambda tr: ce.exact_problem(layout, tr, sigma)), truth
+
+
+def _procedure_trials(p: Mapping[str, Any], rng: np.random.Generator, n: int
+                      ) -> dict[str, FloatArray]:
+    """:func:`run_collimation_trials` under ``readings = "reference"``."""
+    side = float(p["roll_mirror"])
+    layout, noise, sigma, truth, rolls = _procedure_design(p)
     prior = float(p["roll_prior"])
     effects = tuple(e.strip() for e in str(p["fit_effects"]).split(",") if e.strip())
     # a model with ins_roll refits the rolls it was given (a diagnosis fixes the others at 0)
