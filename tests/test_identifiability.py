@@ -83,6 +83,11 @@ def test_cli_identifiability_linear_json(tmp_path):
     assert out.returncode == 2 and "--check-sets" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "d.json").exists()
+    auto = [a if a != "3" else "auto" for a in collimation_args(tmp_path)]
+    out = run_cli(*auto, "--identifiability", "--sets", "1000")
+    assert out.returncode == 2 and "--angle-sigma-arcsec" in out.stderr and "auto" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "d.json").exists()
     out = run_cli(*collimation_args(tmp_path), "--identifiability", "--sets", "1000")
     assert out.returncode == 0, out.stderr[-2000:]
     report = json.loads((tmp_path / "d.json").read_text())

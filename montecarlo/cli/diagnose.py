@@ -61,9 +61,16 @@ START_IMAGE_NOISE = 0.1
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before any work, a --report directory or --json file that cannot be written,
-    and --check-sets without --identifiability."""
+    --check-sets without --identifiability, and --identifiability with a noise left to
+    ``auto`` (its rates are those of the tests at a known noise)."""
     if getattr(args, "check_sets", 0) and not args.identifiability:
         raise InputError("--check-sets: only with --identifiability")
+    if getattr(args, "identifiability", False):
+        for flag in ("pixel_sigma_px", "survey_sigma_m", "angle_sigma_arcsec"):
+            if getattr(args, flag, None) == "auto":
+                raise InputError(f"--identifiability: needs --{flag.replace('_', '-')} stated "
+                                 "(not auto): its rates are those of the tests at a known "
+                                 "noise; state the value auto estimated")
     if args.report:
         OutputDir(args.report, "diagnose", inputs=(Path(args.data),)).check()
     check_json_option(args)
