@@ -193,5 +193,5 @@ def test_the_readme_chain(tmp_path):
         out = _cli(*shlex.split(command)[1:], cwd=tmp_path)
         assert out.returncode == 0, out.stderr[-2000:]
     errors = tomllib.loads((tmp_path / "camera_errors.toml").read_text())
-    assert errors["errors"]["pixel_px"]["sigma"] == pytest.approx(0.815, abs=0.0005)
+    assert errors["errors"]["pixel_px"]["sigma"] == pytest.approx(0.356, abs=0.0005)
     assert (tmp_path / "results" / "sizing" / "answers.csv").is_file()
