@@ -107,8 +107,12 @@ def test_leave_one_group_out_matches_lstsq() -> None:
     problem, g, x, y = _toy()
     after = fit_model(problem, ["quad"])
     d = SimpleNamespace(problem=problem, after=after, alpha=0.01)
-    view = SimpleNamespace(rms_unit="m", rms_scale=1.0, raw_residuals=lambda p: (
-        y - np.array([p[f"a{k}"] for k in range(4)])[g] - p["b"] * x - p.get("c", 0.0) * x ** 2)[:, None])
+
+    def raw(p: dict[str, float]) -> np.ndarray:
+        a = np.array([p[f"a{k}"] for k in range(4)])[g]
+        return (y - a - p["b"] * x - p.get("c", 0.0) * x ** 2)[:, None]
+
+    view = SimpleNamespace(rms_unit="m", rms_scale=1.0, raw_residuals=raw)
     groups = {str(k): np.flatnonzero(g == k).tolist() for k in range(4)}
     loo = leave_one_group_out(d, view, groups, "group")  # type: ignore[arg-type]
     for label, quadratic in (("final model", True), ("without quad", False)):
