@@ -3,6 +3,9 @@ against scipy / statsmodels and a direct numpy least-squares computation."""
 
 from __future__ import annotations
 
+import json
+import re
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -13,11 +16,13 @@ from scipy import stats
 from statsmodels.formula.api import ols
 from statsmodels.stats.anova import anova_lm
 
+from montecarlo.cli import main
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.discrepancy.groups import (
     clustering,
     format_clustering,
     format_leave_one_out,
+    groups_of,
     leave_one_group_out,
     one_way_anova,
 )
@@ -133,3 +138,33 @@ def test_leave_one_group_out_matches_lstsq() -> None:
         assert loo["models"][label]["rms"] == pytest.approx(pooled, rel=1e-6)
     assert loo["models"]["without quad"]["verdict"] == "predicts"
     assert "without quad" in format_leave_one_out(loo)
+
+
+def test_small_cells_skip_the_scatter_test_and_singletons_have_no_groups() -> None:
+    """Two values a cell: deviations from the median are equal, so no scatter test; the
+    offset test then carries the whole alpha."""
+    rng = np.random.default_rng(5)
+    d, groups = _stub(rng.normal(size=2 * 4 * 2), 4, 2)
+    c = clustering(d, groups, "mirror")
+    assert c["scatter"] is None
+    assert c["rejected"] == (c["offset"]["p_value"] < 0.05)
+    assert "scatter not tested" in format_clustering(c)
+    assert groups_of(["A", "B", "C"]) is None
+    assert groups_of(["A", "B", "A"]) == {"A": [0, 2], "B": [1]}
+
+
+def test_collimation_cli_reports_clustering_by_mirror(tmp_path, capsys) -> None:
+    """Each mirror read in both sets: two observations a mirror, the line is printed and the
+    JSON carries it; the shipped example (one observation a mirror) has no groups."""
+    shipped = Path("results/examples/discrepancy_collimation/data.csv")
+    data = tmp_path / "twice.csv"
+    data.write_text(re.sub(r"^P(\d),pitch", r"A\1,pitch", shipped.read_text(), flags=re.M))
+    out = tmp_path / "d.json"
+    assert main(["diagnose", "collimation", str(data), "--angle-sigma-arcsec", "5",
+                 "--readings", "absolute", "--json", str(out)]) == 0
+    c = json.loads(out.read_text())["clustering"]
+    assert (c["kind"], c["groups"], c["offset"]["dof1"]) == ("mirror", 7, 13)
+    capsys.readouterr()
+    assert main(["diagnose", "collimation", str(shipped), "--angle-sigma-arcsec", "5",
+                 "--readings", "absolute"]) == 0
+    assert "cluster" not in capsys.readouterr().out

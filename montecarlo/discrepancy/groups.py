@@ -62,6 +62,17 @@ def one_way_anova(values: FloatArray, cells: IntArray) -> dict[str, float]:
             "within_sd": float(np.sqrt(ms_within))}
 
 
+def groups_of(labels: Sequence[str]) -> dict[str, list[int]] | None:
+    """Observations (0-based) of each label, in order of first appearance; None when the data
+    have no groups to compare (fewer than two labels, or one observation per label)."""
+    out: dict[str, list[int]] = {}
+    for i, label in enumerate(labels):
+        out.setdefault(str(label), []).append(i)
+    if len(out) < 2 or len(out) == len(labels):
+        return None
+    return out
+
+
 def _flagged(d: Diagnosis) -> set[str]:
     return {e[len(OUTLIER):] for e in d.after.effects if is_outlier(e)}
 
@@ -72,12 +83,18 @@ def _rows(problem: Problem, members: Sequence[int], skip: set[str]) -> list[int]
             if problem.observations[m][0] not in skip]
 
 
+MIN_SCATTER_CELL = 5
+"""Fewest values per cell for the scatter test: with two values the deviations from the
+median are equal by construction, and small cells make Brown-Forsythe's test degenerate."""
+
+
 def clustering(d: Diagnosis, groups: Mapping[str, Sequence[int]], kind: str
                ) -> dict[str, Any]:
     """Do the final model's whitened residuals cluster by group? ``groups`` maps a group's
     name to its observations (0-based indices into ``d.problem.observations``), ``kind``
     names them (``"view"``); flagged observations are left out; cells are group x residual
-    component. Two one-way analyses of variance, each at alpha / 2 (Bonferroni):
+    component. Two one-way analyses of variance, each at alpha / 2 (Bonferroni; the second
+    only with :data:`MIN_SCATTER_CELL` values in every cell, the first then at alpha):
 
     - ``offset``: of the residuals (a per-group offset, the random-effects model);
     - ``scatter``: of their absolute deviations from the cell median (Brown-Forsythe's test of
@@ -99,21 +116,36 @@ def clustering(d: Diagnosis, groups: Mapping[str, Sequence[int]], kind: str
     x = np.array(values)
     _, labels = np.unique(np.array(cells), axis=0, return_inverse=True)
     labels = labels.reshape(-1)
-    medians = np.array([np.median(x[labels == c]) for c in range(labels.max() + 1)])
     offset = one_way_anova(x, labels)
-    scatter = one_way_anova(np.abs(x - medians[labels]), labels)
+    scatter = None
+    if np.bincount(labels).min() >= MIN_SCATTER_CELL:
+        medians = np.array([np.median(x[labels == c]) for c in range(labels.max() + 1)])
+        scatter = one_way_anova(np.abs(x - medians[labels]), labels)
+    tests = [t["p_value"] for t in (offset, scatter) if t is not None]
     return {"offset": offset, "scatter": scatter, "groups": len(groups), "kind": kind,
-            "alpha": d.alpha, "rms_sigma": rms,
-            "rejected": min(offset["p_value"], scatter["p_value"]) < d.alpha / 2}
+            "alpha": d.alpha, "rms_sigma": rms, "rejected": min(tests) < d.alpha / len(tests)}
+
+
+def clustering_by(d: Diagnosis, kind: str, labels: Sequence[str]) -> dict[str, Any] | None:
+    """:func:`clustering` with the groups given as each observation's label; None when the
+    data have no groups to compare, or too few observations beside the flagged ones."""
+    groups = groups_of(labels)
+    if groups is None:
+        return None
+    try:
+        return clustering(d, groups, kind)
+    except ValueError:
+        return None
 
 
 def format_clustering(c: Mapping[str, Any]) -> str:
     """One line of :func:`clustering`."""
     o, s, kind = c["offset"], c["scatter"], c["kind"]
     rms = c["rms_sigma"].values()
+    scatter = (f"scatter F({s['dof1']}, {s['dof2']}) = {s['F']:.3g}, p = {s['p_value']:.3g}"
+               if s else f"scatter not tested (fewer than {MIN_SCATTER_CELL} values a cell)")
     stat = (f"offset F({o['dof1']}, {o['dof2']}) = {o['F']:.3g}, p = {o['p_value']:.3g}; "
-            f"scatter F({s['dof1']}, {s['dof2']}) = {s['F']:.3g}, p = {s['p_value']:.3g}; "
-            f"rms per {kind} {min(rms):.3g} to {max(rms):.3g} sigma")
+            f"{scatter}; rms per {kind} {min(rms):.3g} to {max(rms):.3g} sigma")
     if c["rejected"]:
         return (f"residuals cluster by {kind}: {stat}; the stated sigma is too optimistic "
                 f"for points of one {kind}: a correlated misfit, not missing physics")
