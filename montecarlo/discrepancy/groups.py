@@ -162,9 +162,9 @@ def _held(problem: Problem, fixed: Mapping[str, float], base: Effect,
     def residuals(values: Mapping[str, FloatArray]) -> FloatArray:
         arrays = [np.asarray(v) for v in values.values()]
         batch = max((a.shape[0] for a in arrays if a.ndim), default=0)
-        held = {k: (np.full((batch, 1), v) if batch else v) for k, v in fixed.items()
-                if k not in values}
-        return np.asarray(full({**held, **values}), float)[..., index]
+        held: dict[str, Any] = {k: (np.full((batch, 1), v) if batch else v)
+                                for k, v in fixed.items() if k not in values}
+        return np.asarray(full({**held, **values}), dtype=np.float64)[..., index]
 
     return Problem(problem.system, base, problem.candidates, residuals,
                    {k: v for k, v in problem.start.items() if k in base.parameters},
@@ -195,7 +195,8 @@ def _predict(d: Diagnosis, view: SystemView, effects: Sequence[str], members: Se
     if local:
         test = _held(problem, params, _sub_effect(base, local, "local"), test_rows)
         params.update(fit_model(test, [], {p: after[p] for p in local}).params)
-    r = np.asarray(problem.residuals(params), float)[test_rows]
+    given: dict[str, Any] = params
+    r = np.asarray(problem.residuals(given), dtype=np.float64)[test_rows]
     kept = [m for m in members if problem.observations[m][0] not in skip]
     raw = view.raw_residuals(params)[kept] / view.rms_scale
     return r, raw
