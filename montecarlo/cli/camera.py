@@ -117,6 +117,12 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         from montecarlo.discrepancy import camera_effects as cam
         from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError, fit_model
+        from montecarlo.discrepancy.groups import (
+            clustering,
+            format_clustering,
+            format_leave_one_out,
+            leave_one_group_out,
+        )
         from montecarlo.discrepancy.significance import (
             format_significance,
             practical_significance,
@@ -162,14 +168,22 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         report["noise_estimate"] = noise
     significance = practical_significance(d, view, cam.INTRINSIC_REPORTED)
     error = cam.pixel_error(d, data, sigma)
+    groups = cam.view_groups(data)
     report.update({"rms_convention": RMS_CONVENTION, "camera": camera_summary(d),
-                   "practical_significance": significance, "pixel_error": error})
+                   "practical_significance": significance, "pixel_error": error,
+                   "clustering": clustering(d, groups, "view")})
+    if args.leave_one_out:
+        with steps("leave one view out", "two fits per view and model"):
+            report["leave_one_out"] = leave_one_group_out(d, view, groups, "view")
     camera = report["camera"]
     lines = [format_text(report), "", RMS_CONVENTION,
              "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
                  f"{k} = {v['value']:.6g} ± {v['stderr']:.2g}{_unit(v['unit'])}"
                  for k, v in camera.items() if v["stderr"] > 0),
              format_significance(significance),
+             *([format_leave_one_out(report["leave_one_out"], significance)]
+               if args.leave_one_out else []),
+             format_clustering(report["clustering"]),
              f"pixel error left: sigma u {error['sigma_u']:.4f} px, v {error['sigma_v']:.4f} px;"
              f" remaining distortion up to {error['distortion_bound']:.4f} px "
              f"({error['distortion_source'] or 'none tested'}, at its MDB)"]
@@ -403,5 +417,9 @@ def add_diagnose_parser(dsub: argparse._SubParsersAction,
                    "and the two CSV files)")
     p.add_argument("--emit-errors", metavar="FILE.toml", help="write the [errors] pixel entry "
                    "of a ground study (for montecarlo size|run --errors)")
+    p.add_argument("--leave-one-out", action="store_true", help="out-of-sample evidence: "
+                   "refit the final model (and it without each named effect) on all views but "
+                   "one, predict that view's corners (its pose fitted), for each view; slow: "
+                   "two fits per view and model")
     basic(p)
     p.set_defaults(func=diagnose_camera)

@@ -46,6 +46,8 @@ from montecarlo.io.files import OutputDir, writable_file
 from montecarlo.units import ARCSEC
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from montecarlo.discrepancy.engine import Diagnosis
     from montecarlo.discrepancy.view import SystemView
     from montecarlo.io.collimation_csv import MirrorData
@@ -85,11 +87,18 @@ def _check_files(args: argparse.Namespace) -> None:
 
 def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
                       source: str, steps: Steps, extra: dict | None = None,
-                      preface: tuple[str, ...] = ()) -> int:
+                      preface: tuple[str, ...] = (),
+                      groups: tuple[str, Sequence[str]] | None = None) -> int:
+    """Print or write the diagnosis; ``groups``: (kind, the label of each observation) for the
+    test of residuals clustering by group."""
+    from montecarlo.discrepancy.groups import clustering_by, format_clustering
     from montecarlo.discrepancy.view import format_text, to_json
     from montecarlo.output.provenance import provenance
 
     report = {**to_json(d, view, source), **(extra or {})}
+    grouped = None if groups is None else clustering_by(d, *groups)
+    if grouped is not None:
+        report["clustering"] = grouped
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
     if getattr(args, "identifiability", False):
         from montecarlo.systems import identifiability
@@ -118,7 +127,9 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
         steps.report(to_stderr=True)
         return 0
-    print("\n".join([*preface, format_text(report)]))
+    print("\n".join([*preface, format_text(report),
+                     *([format_clustering(report["clustering"])] if "clustering" in report
+                       else [])]))
     if "identifiability" in report:
         from montecarlo.systems.identifiability import format_table
 
@@ -157,7 +168,7 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ge.report_view(data, camera, sigma, survey,
                                                      args.refraction_k), str(args.data), steps,
-                             extra)
+                             extra, groups=("target", data.targets))
 
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
@@ -186,7 +197,7 @@ def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     except FitError as exc:
         raise InputError(f"{args.data}: {exc}") from None
     return _diagnosis_output(args, d, ce.report_view(data, sigma), str(args.data), steps,
-                             extra)
+                             extra, groups=("mirror", data.mirror))
 
 
 def _check_separable(path: str, data: MirrorData) -> None:
@@ -275,7 +286,12 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
 
     from montecarlo.discrepancy import procedure_effects as pe
     from montecarlo.discrepancy.fit import FitError
-    from montecarlo.io.collimation_csv import REFERENCE_SETS, SETS, read_mirror_csv
+    from montecarlo.io.collimation_csv import (
+        REFERENCE_SETS,
+        SETS,
+        procedure_data,
+        read_mirror_csv,
+    )
 
     data = read_mirror_csv(args.data, pe.min_mirrors(), "gamma, lambda (+ reference azimuth) "
                            "+ up to 2 parameters of an effect + 1 degree of freedom",
@@ -310,7 +326,8 @@ def _diagnose_procedure(args: argparse.Namespace, sigma: float, steps: Steps) ->
                     + ("decided by the data" if c.decided else f"not decided: {c.reason}") + ")"
                     for k, c in choices.items())
     return _diagnosis_output(args, d, pe.report_view(data, sigma, side, prior), str(args.data),
-                             steps, extra, preface)
+                             steps, extra, preface,
+                             ("mirror", [data.mirror[i] for i in procedure_data(data).measured]))
 
 
 def _cmd_synth_ground(args: argparse.Namespace) -> int:

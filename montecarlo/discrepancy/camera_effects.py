@@ -136,6 +136,11 @@ def estimate_pixel_sigma(data: CameraData) -> dict[str, float]:
     return {"sigma": s["factor"], "low": s["low"], "high": s["high"], "dof": s["dof"]}
 
 
+def view_groups(data: CameraData) -> dict[str, list[int]]:
+    """Each view's label -> its corners (0-based indices of the problem's observations)."""
+    return {v: np.flatnonzero(data.view == i).tolist() for i, v in enumerate(data.views)}
+
+
 def raw_residuals(data: CameraData, params: Mapping[str, float]) -> FloatArray:
     """Measured minus predicted pixels (n, 2) [px]."""
     r, t = poses_of(params, len(data.views))

@@ -1,0 +1,170 @@
+"""Grouped observations: clustering of residuals by group and leave-one-group-out prediction,
+against scipy / statsmodels and a direct numpy least-squares computation."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+from statsmodels.formula.api import ols
+from statsmodels.stats.anova import anova_lm
+
+from montecarlo.cli import main
+from montecarlo.discrepancy.fit import fit_model
+from montecarlo.discrepancy.groups import (
+    clustering,
+    format_clustering,
+    format_leave_one_out,
+    groups_of,
+    leave_one_group_out,
+    one_way_anova,
+)
+from montecarlo.discrepancy.problem import Effect, Problem
+
+
+def test_one_way_anova_matches_scipy_and_statsmodels() -> None:
+    rng = np.random.default_rng(1)
+    cells = np.repeat(np.arange(4), [5, 8, 6, 11])
+    x = rng.normal(size=cells.size) + 0.4 * cells
+    ours = one_way_anova(x, cells)
+    ref = stats.f_oneway(*(x[cells == c] for c in range(4)))
+    table = anova_lm(ols("x ~ C(g)", pd.DataFrame({"x": x, "g": cells})).fit())
+    assert ours["F"] == pytest.approx(ref.statistic, rel=1e-12)
+    assert ours["p_value"] == pytest.approx(ref.pvalue, rel=1e-9)
+    assert ours["F"] == pytest.approx(table["F"].iloc[0], rel=1e-9)
+    assert (ours["dof1"], ours["dof2"]) == (3, cells.size - 4)
+
+
+def _stub(residual: np.ndarray, n_groups: int, per: int) -> tuple[Any, dict[str, list[int]]]:
+    """A diagnosis of ``n_groups`` groups of ``per`` observations of two components each."""
+    obs = tuple((f"g{i // per}/{i}", i + 1, (2 * i, 2 * i + 1)) for i in range(n_groups * per))
+    d = SimpleNamespace(problem=SimpleNamespace(observations=obs), alpha=0.05,
+                        after=SimpleNamespace(residual=residual, effects=("base",)))
+    return d, {f"g{g}": list(range(g * per, (g + 1) * per)) for g in range(n_groups)}
+
+
+def test_clustering_cells_and_scatter_test_match_scipy() -> None:
+    rng = np.random.default_rng(2)
+    r = rng.normal(size=2 * 3 * 7)
+    d, groups = _stub(r, 3, 7)
+    c = clustering(d, groups, "view")
+    u, v = r[0::2].reshape(3, 7), r[1::2].reshape(3, 7)
+    cells = [*u, *v]
+    assert c["offset"]["F"] == pytest.approx(stats.f_oneway(*cells).statistic, rel=1e-12)
+    assert c["scatter"]["p_value"] == pytest.approx(
+        stats.levene(*cells, center="median").pvalue, rel=1e-9)
+    assert c["rejected"] == (min(c["offset"]["p_value"], c["scatter"]["p_value"]) < 0.025)
+    assert ("do not cluster" in format_clustering(c)) == (not c["rejected"])
+
+
+@pytest.mark.parametrize("offset", [0.0, 1.0])
+def test_clustering_rejection_rate(offset: float) -> None:
+    """Null: the rate at alpha = 0.05 within its binomial 99.9 % band (two-sided); a per-group
+    offset of one sigma in 6 groups of 10 points: rejected nearly always."""
+    rng = np.random.default_rng(3)
+    sets, n_groups, per = 600, 6, 10
+    rejected = 0
+    for _ in range(sets):
+        r = rng.normal(size=(n_groups, per, 2))
+        r += offset * rng.normal(size=(n_groups, 1, 2))
+        d, groups = _stub(r.reshape(-1), n_groups, per)
+        rejected += clustering(d, groups, "view")["rejected"]
+    rate = rejected / sets
+    if offset == 0.0:
+        low, high = stats.binom.ppf([0.0005, 0.9995], sets, 0.05) / sets
+        assert low <= rate <= high
+    else:
+        assert rate >= 0.9
+
+
+def _toy() -> tuple[Problem, np.ndarray, np.ndarray, np.ndarray]:
+    """y = a_g + b x + c x^2 + noise in 4 groups: intercepts local, b shared, c a candidate."""
+    rng = np.random.default_rng(4)
+    g = np.repeat(np.arange(4), 12)
+    x = rng.uniform(-1, 1, g.size)
+    y = np.array([1.0, -2.0, 0.5, 3.0])[g] + 0.7 * x + 0.3 * x ** 2 + 0.1 * rng.normal(size=x.size)
+    sigma = 0.1
+    names = [f"a{k}" for k in range(4)]
+
+    def residuals(values: Any) -> np.ndarray:
+        given = [np.asarray(values.get(n, 0.0), float) for n in (*names, "b", "c")]
+        batched = any(v.ndim for v in given)
+        cols = np.broadcast_arrays(*(v.reshape(-1, 1) for v in given))
+        pred = np.hstack(cols[:4])[:, g] + cols[4] * x + cols[5] * x ** 2
+        r = (y - pred) / sigma
+        return r if batched else r[0]
+
+    base = Effect("line", (*names, "b"), ((-np.inf, np.inf),) * 5, (1e-4,) * 5)
+    quad = Effect("quad", ("c",), ((-10.0, 10.0),), (1e-4,))
+    obs = tuple((f"{g[i]}/{i}", i + 1, (i,)) for i in range(x.size))
+    return Problem("toy", base, (quad,), residuals, dict.fromkeys((*names, "b"), 0.0),
+                   observations=obs), g, x, y
+
+
+def test_leave_one_group_out_matches_lstsq() -> None:
+    problem, g, x, y = _toy()
+    after = fit_model(problem, ["quad"])
+    d = SimpleNamespace(problem=problem, after=after, alpha=0.01)
+
+    def raw(p: dict[str, float]) -> np.ndarray:
+        a = np.array([p[f"a{k}"] for k in range(4)])[g]
+        return (y - a - p["b"] * x - p.get("c", 0.0) * x ** 2)[:, None]
+
+    view = SimpleNamespace(rms_unit="m", rms_scale=1.0, raw_residuals=raw)
+    groups = {str(k): np.flatnonzero(g == k).tolist() for k in range(4)}
+    loo = leave_one_group_out(d, view, groups, "group")  # type: ignore[arg-type]
+    for label, quadratic in (("final model", True), ("without quad", False)):
+        errors = []
+        for k in range(4):
+            train = g != k
+            cols = [(g[train] == j).astype(float) for j in range(4) if j != k] + [x[train]]
+            cols += [x[train] ** 2] if quadratic else []
+            coef = np.linalg.lstsq(np.column_stack(cols), y[train], rcond=None)[0]
+            slope, curve = coef[3], (coef[4] if quadratic else 0.0)
+            rest = y[~train] - slope * x[~train] - curve * x[~train] ** 2
+            e = rest - rest.mean()  # the left-out group's own intercept fitted to it alone
+            errors.append(e)
+            got = loo["models"][label]["per_group"][str(k)]
+            assert got["rms"] == pytest.approx(np.sqrt(np.mean(e ** 2)), rel=1e-6)
+            assert got["rms_sigma"] == pytest.approx(np.sqrt(np.mean(e ** 2)) / 0.1, rel=1e-6)
+        pooled = np.sqrt(np.mean(np.concatenate(errors) ** 2))
+        assert loo["models"][label]["rms"] == pytest.approx(pooled, rel=1e-6)
+    assert loo["models"]["without quad"]["verdict"] == "predicts"
+    assert "without quad" in format_leave_one_out(loo)
+
+
+def test_small_cells_skip_the_scatter_test_and_singletons_have_no_groups() -> None:
+    """Two values a cell: deviations from the median are equal, so no scatter test; the
+    offset test then carries the whole alpha."""
+    rng = np.random.default_rng(5)
+    d, groups = _stub(rng.normal(size=2 * 4 * 2), 4, 2)
+    c = clustering(d, groups, "mirror")
+    assert c["scatter"] is None
+    assert c["rejected"] == (c["offset"]["p_value"] < 0.05)
+    assert "scatter not tested" in format_clustering(c)
+    assert groups_of(["A", "B", "C"]) is None
+    assert groups_of(["A", "B", "A"]) == {"A": [0, 2], "B": [1]}
+
+
+def test_collimation_cli_reports_clustering_by_mirror(tmp_path, capsys) -> None:
+    """Each mirror read in both sets: two observations a mirror, the line is printed and the
+    JSON carries it; the shipped example (one observation a mirror) has no groups."""
+    shipped = Path("results/examples/discrepancy_collimation/data.csv")
+    data = tmp_path / "twice.csv"
+    data.write_text(re.sub(r"^P(\d),pitch", r"A\1,pitch", shipped.read_text(), flags=re.M))
+    out = tmp_path / "d.json"
+    assert main(["diagnose", "collimation", str(data), "--angle-sigma-arcsec", "5",
+                 "--readings", "absolute", "--json", str(out)]) == 0
+    c = json.loads(out.read_text())["clustering"]
+    assert (c["kind"], c["groups"], c["offset"]["dof1"]) == ("mirror", 7, 13)
+    capsys.readouterr()
+    assert main(["diagnose", "collimation", str(shipped), "--angle-sigma-arcsec", "5",
+                 "--readings", "absolute"]) == 0
+    assert "cluster" not in capsys.readouterr().out
