@@ -69,20 +69,6 @@ def test_a_stated_noise_the_data_reject_is_warned(scale, verdict):
     assert f"pixel sigma px {0.25 * s['factor']:.4g}" in text
 
 
-def test_camera_pixel_sigma_estimated_from_simulated_views():
-    """Five simulated views (5 x 5 corners) with 0.2 px noise and radial distortion: the
-    estimate from the model with every candidate is within its 95 % interval of 0.2 px, and
-    within 15 % of it (200 coordinates, about 160 dof: sd 5.6 %)."""
-    from montecarlo.camera_calibration.simulate import DEFAULT_CAMERA
-    from montecarlo.discrepancy.camera_effects import estimate_pixel_sigma
-    from montecarlo.tools import camera_acceptance as ca
-
-    data = ca.views_data({**DEFAULT_CAMERA, "k1": -0.3}, 0.2, 4, 5)
-    s = estimate_pixel_sigma(data)
-    assert s["low"] <= 0.2 <= s["high"]
-    assert abs(s["sigma"] / 0.2 - 1.0) < 0.15
-
-
 def test_pixel_sigma_flag_takes_auto_or_a_positive_number(capsys):
     from montecarlo.cli import main
 

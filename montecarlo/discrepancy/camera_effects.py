@@ -28,8 +28,6 @@ from numpy.typing import ArrayLike, NDArray
 from montecarlo.camera_calibration.calibrate import closed_form, pose_names, poses_of
 from montecarlo.camera_calibration.model import project
 from montecarlo.discrepancy.engine import Diagnosis
-from montecarlo.discrepancy.fit import fit_model
-from montecarlo.discrepancy.noise import noise_scale
 from montecarlo.discrepancy.problem import OUTLIER, Effect, Problem
 from montecarlo.discrepancy.view import SystemView
 from montecarlo.io.camera_csv import CameraData
@@ -118,22 +116,6 @@ def camera_problem(data: CameraData, pixel_sigma: float) -> Problem:
                           (2 * i, 2 * i + 1)) for i in range(data.n))
     return Problem("camera", base, CANDIDATES, residuals, start, {}, observations,
                    SEPARATING_DATA, REQUIRES)
-
-
-def estimate_pixel_sigma(data: CameraData) -> dict[str, float]:
-    """Pixel noise [px] estimated from the data: the a-posteriori standard deviation of the
-    model with every candidate fitted (:func:`montecarlo.discrepancy.noise.noise_scale` of
-    the fit whitened by 1 px), with its 95 % interval and degrees of freedom. Unbiased when
-    the true model lies within the candidates; corners far off inflate it.
-
-    Raises
-    ------
-    FitError
-        The model with every candidate cannot be fitted to these data.
-    """
-    problem = camera_problem(data, 1.0)
-    s = noise_scale(fit_model(problem, [c.name for c in CANDIDATES]))
-    return {"sigma": s["factor"], "low": s["low"], "high": s["high"], "dof": s["dof"]}
 
 
 def view_groups(data: CameraData) -> dict[str, list[int]]:
