@@ -196,6 +196,38 @@ def _absorbed_by(column: FloatArray, A: FloatArray, names: Sequence[str]) -> lis
     return [names[i] for i in np.flatnonzero(big)]
 
 
+def absorption(c: Effect, G: FloatArray, Gbar: FloatArray, A: FloatArray, names: Sequence[str],
+               absorbed: float = ABSORBED
+               ) -> tuple[FloatArray, dict[str, float], dict[str, list[str]], list[int]]:
+    """A candidate's columns ``G`` against the model's ``A`` (``Gbar`` projected orthogonal
+    to it): the column norms, the fraction of each kept (``retained``), the absorbed
+    parameters and the model parameters that absorb them, and the indices of the active ones
+    (a parameter is also absorbed by the model together with the candidate's others)."""
+    norms = np.linalg.norm(G, axis=0)
+    kept = np.linalg.norm(Gbar, axis=0) / np.where(norms > 0, norms, 1.0)
+    retained = {p: float(kept[j]) for j, p in enumerate(c.parameters)}
+    absorbed_by: dict[str, list[str]] = {}
+    active = [j for j in range(len(c.parameters)) if norms[j] > 0]
+    for j in active:
+        if kept[j] < absorbed:
+            absorbed_by[c.parameters[j]] = _absorbed_by(G[:, j], A, names)
+    active = [j for j in active if kept[j] >= absorbed]
+    while len(active) > 1:
+        fractions = []
+        for j in active:
+            others = _orthonormal(Gbar[:, [i for i in active if i != j]])
+            rest = Gbar[:, j] - others @ (others.T @ Gbar[:, j])
+            fractions.append(np.linalg.norm(rest) / norms[j])
+        worst = int(np.argmin(fractions))
+        if fractions[worst] >= absorbed:
+            break
+        j = active.pop(worst)
+        absorbed_by[c.parameters[j]] = _absorbed_by(
+            G[:, j], np.column_stack([A, G[:, active]]),
+            [*names, *(c.parameters[i] for i in active)])
+    return norms, retained, absorbed_by, active
+
+
 def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
                        power: float = POWER, absorbed: float = ABSORBED,
                        level: Callable[[int], float] | None = None, test: str = "chi2"
@@ -235,29 +267,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         G = G_all[:, offset:offset + len(c.parameters)]
         offset += len(c.parameters)
         Gbar = G - Q @ (Q.T @ G)
-        norms = np.linalg.norm(G, axis=0)
-        kept = np.linalg.norm(Gbar, axis=0) / np.where(norms > 0, norms, 1.0)
-        retained = {p: float(kept[j]) for j, p in enumerate(c.parameters)}
-        absorbed_by: dict[str, list[str]] = {}
-        active = [j for j in range(len(c.parameters)) if norms[j] > 0]
-        for j in active:
-            if kept[j] < absorbed:
-                absorbed_by[c.parameters[j]] = _absorbed_by(G[:, j], A, fit.names)
-        active = [j for j in active if kept[j] >= absorbed]
-        # a parameter may also be absorbed by the model together with the candidate's others
-        while len(active) > 1:
-            fractions = []
-            for j in active:
-                others = _orthonormal(Gbar[:, [i for i in active if i != j]])
-                rest = Gbar[:, j] - others @ (others.T @ Gbar[:, j])
-                fractions.append(np.linalg.norm(rest) / norms[j])
-            worst = int(np.argmin(fractions))
-            if fractions[worst] >= absorbed:
-                break
-            j = active.pop(worst)
-            absorbed_by[c.parameters[j]] = _absorbed_by(
-                G[:, j], np.column_stack([A, G[:, active]]),
-                [*fit.names, *(c.parameters[i] for i in active)])
+        norms, retained, absorbed_by, active = absorption(c, G, Gbar, A, fit.names, absorbed)
         if not np.any(norms > 0):
             tests[c.name] = CandidateTest(c.name, "no_effect", retained=retained,
                                           reason="its parameters do not change these data")
@@ -274,44 +284,8 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         alpha, m, bool(problem.observations))[0]
     log_ps = []
     for c, active, G, Gbar, retained, absorbed_by in work:
-        Ga = Gbar[:, active]
-        names = tuple(c.parameters[j] for j in active)
-        N = Ga.T @ Ga
-        cov = np.linalg.inv(N)
-        est = cov @ (Ga.T @ r)
-        T = float(est @ N @ est)
-        q = len(active)
-        stat, dof2 = T, 0
-        if test == "chi2":
-            lam0 = noncentrality(size, q, power)
-            log_p = log_chi2_sf(T, q)
-        elif fit.dof - q > 0:
-            dof2 = fit.dof - q
-            F = f_statistic(T, fit.chi2, fit.dof, q)
-            lam0 = noncentrality_f(size, q, dof2, power)
-            log_p = log_f_sf(F, q, dof2)
-            stat, dof2 = (F, dof2) if test == "F" else (pope_tau(T, fit.chi2, fit.dof), fit.dof)
-        else:  # no degree of freedom left to estimate the noise beside it: not testable
-            tests[c.name] = CandidateTest(c.name, "undetectable", names, retained, absorbed_by,
-                                          reason="no degree of freedom left to estimate the "
-                                          "noise beside it", test=test)
-            log_ps.append(0.0)
-            continue
-        mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
-        shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
-        influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))
-        reach = sum(max(abs(c.bounds[j][0]), abs(c.bounds[j][1])) * math.sqrt(N[k, k])
-                    for k, j in enumerate(active)) ** 2
-        status, reason = "testable", ""
-        if reach < lam0:
-            status = "undetectable"
-            reason = (f"noncentrality at most {reach:.3g} within its physical bounds, "
-                      f"{lam0:.3g} needed")
-        tests[c.name] = CandidateTest(
-            c.name, status, names, retained, absorbed_by, stat, q, float(np.exp(log_p)), log_p,
-            math.nan, dict(zip(names, est.tolist(), strict=True)),
-            dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
-            lam0, reason, size, _orthonormal(Ga), Ga, test, dof2)
+        tests[c.name], log_p = candidate_statistics(c, active, G, Gbar, retained, absorbed_by,
+                                                    fit, size, power, test)
         log_ps.append(log_p)
     if work:
         adjusted = holm(np.exp(log_ps))
@@ -319,6 +293,51 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
             t = tests[c.name]
             tests[c.name] = CandidateTest(**{**t.__dict__, "p_adjusted": float(p)})
     return [tests[c.name] for c in problem.candidates]
+
+
+def candidate_statistics(c: Effect, active: list[int], G: FloatArray, Gbar: FloatArray,
+                         retained: dict[str, float], absorbed_by: dict[str, list[str]],
+                         fit: LeastSquaresFit, size: float, power: float = POWER,
+                         test: str = "chi2") -> tuple[CandidateTest, float]:
+    """The test of one candidate with ``active`` parameters (columns ``G``, projected
+    ``Gbar``) at size ``size``, and its log p-value (0 where it cannot be tested)."""
+    A, r = fit.jacobian, fit.residual
+    Ga = Gbar[:, active]
+    names = tuple(c.parameters[j] for j in active)
+    N = Ga.T @ Ga
+    cov = np.linalg.inv(N)
+    est = cov @ (Ga.T @ r)
+    T = float(est @ N @ est)
+    q = len(active)
+    stat, dof2 = T, 0
+    if test == "chi2":
+        lam0 = noncentrality(size, q, power)
+        log_p = log_chi2_sf(T, q)
+    elif fit.dof - q > 0:
+        dof2 = fit.dof - q
+        F = f_statistic(T, fit.chi2, fit.dof, q)
+        lam0 = noncentrality_f(size, q, dof2, power)
+        log_p = log_f_sf(F, q, dof2)
+        stat, dof2 = (F, dof2) if test == "F" else (pope_tau(T, fit.chi2, fit.dof), fit.dof)
+    else:  # no degree of freedom left to estimate the noise beside it: not testable
+        return CandidateTest(c.name, "undetectable", names, retained, absorbed_by,
+                             reason="no degree of freedom left to estimate the noise beside "
+                             "it", test=test), 0.0
+    mdb = {n: math.sqrt(lam0 / N[k, k]) for k, n in enumerate(names)}
+    shift = fit.covariance @ (A.T @ G[:, active]) * np.array(list(mdb.values()))
+    influence = dict(zip(fit.names, np.max(np.abs(shift), axis=1).tolist(), strict=True))
+    reach = sum(max(abs(c.bounds[j][0]), abs(c.bounds[j][1])) * math.sqrt(N[k, k])
+                for k, j in enumerate(active)) ** 2
+    status, reason = "testable", ""
+    if reach < lam0:
+        status = "undetectable"
+        reason = (f"noncentrality at most {reach:.3g} within its physical bounds, "
+                  f"{lam0:.3g} needed")
+    return CandidateTest(
+        c.name, status, names, retained, absorbed_by, stat, q, float(np.exp(log_p)), log_p,
+        math.nan, dict(zip(names, est.tolist(), strict=True)),
+        dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
+        lam0, reason, size, _orthonormal(Ga), Ga, test, dof2), log_p
 
 
 def canonical_correlation(a: CandidateTest, b: CandidateTest) -> float:

@@ -85,6 +85,7 @@ from montecarlo.discrepancy.confounding import (
 )
 from montecarlo.discrepancy.estimated_sigma import global_f
 from montecarlo.discrepancy.fit import FitError, fit_model
+from montecarlo.discrepancy.observation_tests import analyse_observations
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier, with_outliers
 from montecarlo.lsq import LeastSquaresFit
 
@@ -352,9 +353,9 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
     members = [t for t in tests if math.isfinite(t.statistic)]
     has_obs = bool(observations.candidates)
     _, obs_share = family_levels(alpha, len(members), has_obs)
-    snoop = analyse_candidates(observations, fit, alpha, power, absorbed,
-                               level=lambda k: obs_share / max(k, 1),
-                               test=kind[1]) if has_obs else []
+    snoop = analyse_observations(observations, fit, alpha, power, absorbed,
+                                 level=lambda k: obs_share / max(k, 1),
+                                 test=kind[1]) if has_obs else []
     seen = [t for t in snoop if math.isfinite(t.statistic)]
     names = [t.name for t in (*members, *seen)]
     p = [t.p_value for t in (*members, *seen)]
