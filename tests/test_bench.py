@@ -44,6 +44,10 @@ def test_bench_quick_json_has_every_figure():
     assert big["tree_rss_mb"] >= big["max_process_rss_mb"]
     assert big["tree_pss_mb"] <= big["tree_rss_mb"]
     assert r["compile_seconds_cold_cache"] is None  # measured by --full only
+    # the camera diagnosis on Zhang's data at 0.25 px, measured once; it names k1 first
+    [zhang] = r["camera_diagnoses"]
+    assert zhang["pixel_sigma_px"] == "0.25" and zhang["named"][0] == "radial_k1"
+    assert 0 < zhang["wall_s"] < float("inf") and 0 < zhang["cpu_s"] < float("inf")
     assert len(r["host_probe_atan2_per_s"]) == 2 and min(r["host_probe_atan2_per_s"]) > 0
     stages = r["roofline"]["stages"]
     assert [s["stage"] for s in stages] == ["draws", "solve", "metrics", "accumulation"]

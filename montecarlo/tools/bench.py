@@ -19,6 +19,9 @@ core, (e) with the literal numpy functions (``reference=True``), (f) with the co
 kernels of :mod:`montecarlo.seed001.simulate_kernels` and
 :mod:`montecarlo.seed001.estimate_kernels`; timed in alternation, median of ``min(repeats, 3)``
 runs each.
+
+``diagnose camera`` on Zhang's real calibration set, the whole command once per stated pixel
+sigma (:mod:`montecarlo.tools.bench_diagnosis`).
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from montecarlo.engine.distributions import Streams
 from montecarlo.engine.runner import RunOptions, run_study, workers_text
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
+from montecarlo.tools.bench_diagnosis import camera_diagnoses, format_diagnoses
 
 WORKLOAD = {
     "study": {"name": "bench", "system": "ground", "trials": 1, "seed": 1},
@@ -430,9 +434,9 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     ``quick`` (what ``make bench`` runs, under 30 s on two quiet cores): the roofline and every
     row at small sizes, the runner scaling at 10^6 and 10^7 trials (below about 10^7 the runner
     keeps a ground study in the calling process: row (d) is the 10^7 run, on the workers), the
-    memory of one 10^6-trial study, no cold-cache compile. Otherwise (``--full``) the sizes of
-    the full benchmark: scaling up to 10^8 trials, memory at 10^4 and 10^8, the compile time
-    with an empty cache.
+    memory of one 10^6-trial study, no cold-cache compile, the camera diagnosis at 0.25 px.
+    Otherwise (``--full``) the sizes of the full benchmark: scaling up to 10^8 trials, memory
+    at 10^4 and 10^8, the compile time with an empty cache, the camera diagnosis at every sigma from 0.15 to 0.3 px and ``auto``.
     """
     started, load_before = time.perf_counter(), list(os.getloadavg())
     probe_before = host_probe()
@@ -448,6 +452,7 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     duration = 5.0 if quick else 60.0
     stab_reference, stab_fast = stabilization_rates(8 if quick else 64, 64 if quick else 256,
                                                     min(repeats, 3), duration)
+    diagnoses = camera_diagnoses(quick)
     return {
         "quick": quick,
         "load_average": load_before,
@@ -468,6 +473,7 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         "stabilization_fast_trials_per_s": stab_fast,
         "stabilization_ratio": stab_fast / stab_reference,
         "stabilization_duration_s": duration,
+        "camera_diagnoses": diagnoses,
         "compile_seconds_cold_cache": None if quick else compile_seconds(),
         "host_probe_atan2_per_s": [probe_before, host_probe()],
         "load_average_after": list(os.getloadavg()),
@@ -518,6 +524,8 @@ def format_bench(r: dict[str, Any]) -> str:
         " trials/s",
         f"{'(f) compiled kernels':<46}{r['stabilization_fast_trials_per_s']:>14,.2f} trials/s",
         f"(f)/(e) = {r['stabilization_ratio']:.1f}x",
+        "",
+        *format_diagnoses(r.get("camera_diagnoses", [])),
         "",
         "scaling through the runner (it picks the path and the workers by the study's size):",
     ]
