@@ -84,7 +84,7 @@ from montecarlo.discrepancy.confounding import (
     separated,
 )
 from montecarlo.discrepancy.estimated_sigma import global_f
-from montecarlo.discrepancy.fit import FitError, fit_model
+from montecarlo.discrepancy.fit import ONE_THREAD, FitError, fit_model
 from montecarlo.discrepancy.observation_tests import analyse_observations
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier, with_outliers
 from montecarlo.lsq import LeastSquaresFit
@@ -203,6 +203,7 @@ class Diagnosis:
                 "statistic": test.statistic, "dof": test.dof}
 
 
+@ONE_THREAD
 def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
              absorbed: float = ABSORBED, confounded: float = CONFOUNDED,
              noise_estimated: bool = False) -> Diagnosis:
