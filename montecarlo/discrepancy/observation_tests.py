@@ -89,8 +89,8 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
             work.append(k)
             continue
         G = _unit_columns(r.size, rows[k])
-        norms, retained, absorbed_by, active = absorption(c, G, projected[:, cols], A,
-                                                          fit.names, absorbed)
+        _, retained, absorbed_by, active = absorption(c, G, projected[:, cols], A, fit.names,
+                                                      absorbed)
         if not active:
             tests[c.name] = CandidateTest(c.name, "absorbed", retained=retained,
                                           absorbed_by=absorbed_by,
@@ -108,8 +108,9 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
             pending[k], active, _unit_columns(r.size, rows[k]), projected[:, cols], retained,
             absorbed_by, fit, size, power, test)
     for q, members in groups.items():
-        for k, t, lp in zip(members, *_batch(pending, members, q, start, flat, projected, Pr, kept,
-                                               fit, size, power, test), strict=True):
+        batch = _batch(pending, members, q, start, flat, projected, Pr, kept, fit, size, power,
+                       test)
+        for k, t, lp in zip(members, *batch, strict=True):
             tests[pending[k].name], log_p[k] = t, lp
     if work:
         adjusted = holm(np.exp([log_p[k] for k in work]))
@@ -145,8 +146,8 @@ def _others_kept(Gbar: FloatArray, absorbed: float) -> bool:
 
 
 def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.int64],
-           flat: NDArray[np.int64], projected: FloatArray, Pr: FloatArray, kept: FloatArray, fit: LeastSquaresFit,
-           size: float, power: float, test: str
+           flat: NDArray[np.int64], projected: FloatArray, Pr: FloatArray, kept: FloatArray,
+           fit: LeastSquaresFit, size: float, power: float, test: str
            ) -> tuple[list[CandidateTest], list[float]]:
     """The tests of observations with ``q`` parameters, none absorbed, at once."""
     cols = np.concatenate([np.arange(start[k], start[k] + q) for k in members])

@@ -436,7 +436,8 @@ def run_bench(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     keeps a ground study in the calling process: row (d) is the 10^7 run, on the workers), the
     memory of one 10^6-trial study, no cold-cache compile, the camera diagnosis at 0.25 px.
     Otherwise (``--full``) the sizes of the full benchmark: scaling up to 10^8 trials, memory
-    at 10^4 and 10^8, the compile time with an empty cache, the camera diagnosis at every sigma from 0.15 to 0.3 px and ``auto``.
+    at 10^4 and 10^8, the compile time with an empty cache, the camera diagnosis at every
+    sigma from 0.15 to 0.3 px and ``auto``.
     """
     started, load_before = time.perf_counter(), list(os.getloadavg())
     probe_before = host_probe()
