@@ -17,7 +17,8 @@ snooping, Teunissen's DIA):
    with all parameters absorbed is never named. The likelihood-ratio statistic of the remaining
    columns is ``T = r' Gbar (Gbar'Gbar)^-1 Gbar' r ~ chi2(q)`` (central under the model,
    noncentral with ``lambda = |Gbar b|^2`` under a bias ``b``). Each observation that can be
-   wrong on its own is a candidate too (its mean shift: data snooping).
+   wrong on its own is a candidate too (its mean shift: data snooping; their tests are
+   computed together from their exact columns, :mod:`montecarlo.discrepancy.observation_tests`).
 3. **Detect and identify in one family**: the global test ``chi2 = r'r ~ chi2(n - p)``, each
    candidate effect's test and the observations' tests form one family under Holm's weighted
    step-down procedure at ``alpha`` (the global test and each effect weight 1, the
