@@ -19,7 +19,7 @@ from montecarlo.camera_calibration.calibrate import (
     closed_form,
     homography,
 )
-from montecarlo.camera_calibration.model import distort, project, rotate
+from montecarlo.camera_calibration.model import distort, project, rotate, rotation_matrix
 from montecarlo.camera_calibration.simulate import (
     DEFAULT_CAMERA,
     simulate,
@@ -39,6 +39,33 @@ def test_rotate_matches_scipy_rotvec_including_tiny_angles():
     p = rng.normal(size=(50, 3))
     np.testing.assert_allclose(rotate(w, p), Rotation.from_rotvec(w).apply(p), rtol=0,
                                atol=1e-14)
+
+
+def test_rotation_matrix_matches_scipy_including_tiny_angles():
+    rng = np.random.default_rng(1)
+    w = rng.normal(size=(50, 3)) * np.logspace(-9, 0.5, 50)[:, None]
+    np.testing.assert_allclose(rotation_matrix(w), Rotation.from_rotvec(w).as_matrix(), rtol=0,
+                               atol=1e-14)
+    np.testing.assert_array_equal(rotation_matrix(np.zeros(3)), np.eye(3))
+
+
+def test_projection_equals_the_point_by_point_rodrigues_reference():
+    """``project`` (a matrix per view) against the literal formula: every point rotated by
+    :func:`rotate`, then eq. (11) and eq. (1), for 7 parameter vectors at once."""
+    rng = np.random.default_rng(2)
+    k, V, n = 7, 4, 60
+    rvec = rng.normal(scale=0.4, size=(k, V, 3))
+    tvec = rng.normal(scale=0.1, size=(k, V, 3)) + np.array([0.0, 0.0, 1.0])
+    pts = rng.uniform(-0.2, 0.2, size=(n, 2))
+    view = rng.integers(0, V, size=n)
+    params = {"f": rng.uniform(700, 900, (k, 1)), "a": 0.002, "gamma": 0.3, "cx": 320.0,
+              "cy": 240.0, "k1": -0.2, "k2": 0.1, "p1": 0.001, "p2": -0.0005}
+    cam = rotate(rvec[:, view], np.column_stack([pts, np.zeros(n)])) + tvec[:, view]
+    xd, yd = distort(cam[..., 0] / cam[..., 2], cam[..., 1] / cam[..., 2], params)
+    u = params["f"] * xd + 0.3 * yd + 320.0
+    v = params["f"] * 1.002 * yd + 240.0
+    np.testing.assert_allclose(project(params, rvec, tvec, pts, view),
+                               np.stack([u, v], axis=-1), rtol=0, atol=1e-10)
 
 
 def test_distortion_by_hand():

@@ -73,18 +73,19 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
     # the projected columns of every observation at once: E - Q Q_R', one column per parameter
     projected = -(Q @ Q[flat].T)
     projected[flat, np.arange(flat.size)] += 1.0
-    N_diag = np.einsum("ij,ij->j", projected, projected)
-    kept = np.sqrt(N_diag)
-    Pr = projected.T @ r
+    Qf = Q[flat]
+    kept = np.sqrt(np.maximum(1.0 - np.einsum("ij,ij->i", Qf, Qf), 0.0))  # |e - Q q|^2 = 1 - |q|^2
+    Pr = r[flat] - Qf @ (Q.T @ r)
 
     # observations with q parameters, all kept (the common case), batched by q
     groups: dict[int, list[int]] = {}
     work: list[int] = []
     start = np.cumsum([0, *(len(rw) for rw in rows)])
     irregular: dict[int, tuple[list[int], dict[str, float], dict[str, list[str]]]] = {}
+    regular = _all_kept(Qf, start, kept, absorbed)
     for k, c in enumerate(pending):
         cols = slice(start[k], start[k + 1])
-        if np.all(kept[cols] >= absorbed) and _others_kept(projected[:, cols], absorbed):
+        if regular[k]:
             groups.setdefault(len(c.parameters), []).append(k)
             work.append(k)
             continue
@@ -108,8 +109,8 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
             pending[k], active, _unit_columns(r.size, rows[k]), projected[:, cols], retained,
             absorbed_by, fit, size, power, test)
     for q, members in groups.items():
-        batch = _batch(pending, members, q, start, flat, projected, Pr, kept, fit, size, power,
-                       test)
+        batch = _batch(pending, members, q, start, flat, projected, Q, Qf, Pr, kept, fit,
+                       size, power, test)
         for k, t, lp in zip(members, *batch, strict=True):
             tests[pending[k].name], log_p[k] = t, lp
     if work:
@@ -127,32 +128,45 @@ def _unit_columns(n: int, rows: list[int]) -> FloatArray:
     return E
 
 
-def _others_kept(Gbar: FloatArray, absorbed: float) -> bool:
-    """Does each column of ``Gbar`` keep at least ``absorbed`` of its unit norm orthogonal to
-    the others (the reference's test of a parameter absorbed together with the others)?"""
-    q = Gbar.shape[1]
-    if q < 2:
-        return True
-    N = Gbar.T @ Gbar
-    for j in range(q):
-        o = [i for i in range(q) if i != j]
-        try:
-            rest = N[j, j] - N[j, o] @ np.linalg.solve(N[np.ix_(o, o)], N[o, j])
-        except np.linalg.LinAlgError:
-            return False
-        if not rest >= absorbed**2:
-            return False
-    return True
+def _gram(Qf: FloatArray, cols: NDArray[np.int64], q: int) -> FloatArray:
+    """The Gram matrices ``Gbar'Gbar = I - Q_R Q_R'`` of observations with ``q`` parameters
+    (their rows ``Q_R`` of the model's basis: ``cols`` of ``Qf``), shape (K, q, q)."""
+    Qk = Qf[cols].reshape(-1, q, Qf.shape[1])
+    return np.eye(q) - Qk @ Qk.transpose(0, 2, 1)
+
+
+def _all_kept(Qf: FloatArray, start: NDArray[np.int64], kept: FloatArray,
+              absorbed: float) -> list[bool]:
+    """For each observation (rows ``start[k]:start[k+1]`` of ``Qf``): does each of its
+    columns keep at least ``absorbed`` of its unit norm orthogonal to the model and to its
+    other columns (the reference's tests of a parameter absorbed, alone or together with the
+    others)? The part orthogonal to the others is the Schur complement
+    ``N_jj - N_jo N_oo^-1 N_oj = 1 / (N^-1)_jj``, computed for all observations of one size
+    at once."""
+    sizes = np.diff(start)
+    out = [bool(np.all(kept[start[k]:start[k + 1]] >= absorbed)) for k in range(sizes.size)]
+    for q in set(sizes[sizes > 1].tolist()):
+        members = [k for k in np.flatnonzero(sizes == q) if out[k]]
+        if not members:
+            continue
+        cols = np.concatenate([np.arange(start[k], start[k] + q) for k in members])
+        N = _gram(Qf, cols, q)
+        det_ok = np.linalg.cond(N) < 1.0 / np.finfo(float).eps
+        rest = np.zeros((len(members), q))
+        rest[det_ok] = 1.0 / np.einsum("kii->ki", np.linalg.inv(N[det_ok]))
+        for i, k in enumerate(members):
+            out[k] = bool(det_ok[i] and np.all(rest[i] >= absorbed**2))
+    return out
 
 
 def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.int64],
-           flat: NDArray[np.int64], projected: FloatArray, Pr: FloatArray, kept: FloatArray,
-           fit: LeastSquaresFit, size: float, power: float, test: str
+           flat: NDArray[np.int64], projected: FloatArray, Q: FloatArray, Qf: FloatArray,
+           Pr: FloatArray, kept: FloatArray, fit: LeastSquaresFit, size: float, power: float,
+           test: str
            ) -> tuple[list[CandidateTest], list[float]]:
     """The tests of observations with ``q`` parameters, none absorbed, at once."""
     cols = np.concatenate([np.arange(start[k], start[k] + q) for k in members])
-    Ga = projected[:, cols].reshape(-1, len(members), q).transpose(1, 0, 2)  # (K, n, q)
-    N = np.einsum("kni,knj->kij", Ga, Ga)
+    N = _gram(Qf, cols, q)
     cov = np.linalg.inv(N)
     b = Pr[cols].reshape(len(members), q)
     est = np.einsum("kij,kj->ki", cov, b)
@@ -190,8 +204,7 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
     shift = (fit.covariance @ fit.jacobian[flat[cols]].T).reshape(
         len(fit.names), len(members), q) * mdb
     influence = np.max(np.abs(shift), axis=2)  # (p, K)
-    u, s, _ = np.linalg.svd(Ga, full_matrices=False)  # each one's orthonormal basis
-    keep = s > 1e-12 * np.maximum(s[:, :1], 1e-300)
+    basis = _bases(N, Q, Qf, cols, flat)
     stderr = np.sqrt(np.einsum("kii->ki", cov))
     bound = np.array([[max(abs(lo), abs(hi)) for lo, hi in pending[k].bounds] for k in members])
     with np.errstate(invalid="ignore"):
@@ -212,9 +225,27 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
             dict(zip(names, stderr[i].tolist(), strict=True)),
             dict(zip(names, mdb[i].tolist(), strict=True)),
             dict(zip(fit.names, influence[:, i].tolist(), strict=True)),
-            lam0, reason, size, u[i] if keep[i].all() else u[i][:, keep[i]], Ga[i], test,
+            lam0, reason, size, basis[:, i * q:(i + 1) * q],
+            projected[:, start[k]:start[k] + q], test,
             dof2))
     return out, log_p.tolist()
+
+
+def _bases(N: FloatArray, Q: FloatArray, Qf: FloatArray, cols: NDArray[np.int64],
+           flat: NDArray[np.int64]) -> FloatArray:
+    """Orthonormal bases of the observations' projected columns ``Gbar_k = E_k - Q Q_k'``, side
+    by side, shape (n, K q): ``Gbar_k W_k`` with ``W_k = V diag(l^-1/2)`` from
+    ``N_k = V diag(l) V'`` (their columns are well conditioned: none absorbed, alone or by
+    the others), i.e. ``E_k W_k - Q (Q_k' W_k)``, one product for all."""
+    K, q = N.shape[0], N.shape[1]
+    eigenvalues, V = np.linalg.eigh(N)
+    W = V / np.sqrt(eigenvalues)[:, None, :]  # (K, q, q)
+    Qk = Qf[cols].reshape(K, q, -1)
+    M = (Qk.transpose(0, 2, 1) @ W).transpose(1, 0, 2).reshape(Q.shape[1], K * q)
+    basis = -(Q @ M)
+    rows = flat[cols].reshape(K, q)
+    basis[rows[:, :, None], np.arange(K * q).reshape(K, 1, q)] += W
+    return basis
 
 
 def _retained(c: Effect, kept: FloatArray, first: int | np.int64) -> dict[str, float]:
