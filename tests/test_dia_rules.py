@@ -17,7 +17,7 @@ from scipy import stats
 from montecarlo.discrepancy import candidate_tests, engine
 from montecarlo.discrepancy.candidate_tests import analyse_candidates, holm
 from montecarlo.discrepancy.engine import Diagnosis, diagnose
-from montecarlo.discrepancy.fit import FitError, fit_model
+from montecarlo.discrepancy.fit import FitError, fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem, with_outliers
 
 N = 40
@@ -754,6 +754,34 @@ def test_a_named_effect_the_model_cannot_be_refitted_without_is_a_group_of_its_o
     assert d.named == ["M", "K"] and d.groups == [("M",), ("K",)]
     assert d.confounded[0] == engine.Group("M", ("M",))
     assert d.after.params["k"] == pytest.approx(2.0, rel=1e-9)
+
+
+def test_a_column_that_is_round_off_is_no_effect_and_a_tiny_true_one_is_kept():
+    """'C' cancels exactly, as a common bias of two readings does in their difference:
+    (B1 + c) - (B2 + c) - (B1 - B2) with B1, B2 of 1e5-1e6, so only the residuals' round-off
+    moves (about 1e-10 per point). 'T' is a true column 1e-9 x^2. Before: C got a column of
+    round-off (norm ~4e-7 at the 1e-3 step), a finite MDB and a status of its own; now it has
+    no effect, and T's column is kept (to the round-off of its own differences, ~1e-5)."""
+    y = 0.3 + 0.5 * X + noise()
+    b1, b2 = 1e6 * (1.0 + X) + np.pi, 3e5 * (1.0 - X) + np.e
+
+    def residuals(v):
+        def p(k):
+            return np.asarray(v.get(k, 0.0), float)
+        c = p("c")
+        return y - p("a") - p("b") * X + ((b1 + c) - (b2 + c) - (b1 - b2)) \
+            - p("t") * 1e-9 * X**2
+
+    effects = tuple(Effect(n, (n.lower(),), ((-1e3, 1e3),), (1e-3,)) for n in ("C", "T"))
+    problem = Problem("toy", LINE, effects, residuals, {"a": 0.0, "b": 0.0})
+    fit = fit_model(problem, ())
+    assert np.linalg.norm(jacobian(problem, fit.params, ["c"])) > 1e-8  # the round-off
+    tests = {t.name: t for t in analyse_candidates(problem, fit)}
+    assert tests["C"].status == "no_effect"
+    assert tests["T"].status in ("testable", "undetectable")
+    assert tests["T"].projected is not None
+    np.testing.assert_allclose(np.linalg.norm(tests["T"].projected),
+                               1e-9 * np.linalg.norm(X**2 - ONE * (X**2).mean()), rtol=1e-4)
 
 
 def group_design(bound=100.0):

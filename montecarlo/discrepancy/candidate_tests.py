@@ -25,7 +25,7 @@ from montecarlo.discrepancy.estimated_sigma import (
     noncentrality_f,
     pope_tau,
 )
-from montecarlo.discrepancy.fit import jacobian
+from montecarlo.discrepancy.fit import candidate_columns
 from montecarlo.discrepancy.problem import Effect, Problem
 from montecarlo.lsq import LeastSquaresFit
 
@@ -252,7 +252,8 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
     pending = [c for c in problem.candidates
                if c.name not in fit.effects and c.name not in unavailable]
     all_params = [p for c in pending for p in c.parameters]
-    G_all = jacobian(problem, values, all_params) if all_params else np.zeros((r.size, 0))
+    G_all = candidate_columns(problem, values, all_params) if all_params else \
+        np.zeros((r.size, 0))
 
     tests: dict[str, CandidateTest] = {}
     work: list[tuple[Effect, list[int], FloatArray, FloatArray, dict, dict]] = []

@@ -33,14 +33,17 @@ class FitError(ValueError):
     """The model cannot be fitted to these data (too few observations, singular design)."""
 
 
-def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]) -> FloatArray:
+def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str],
+             step_scale: float = 1.0) -> FloatArray:
     """Whitened design columns ``-d residual / d parameter`` by central differences, (n, k).
 
     All ``2k`` perturbed parameter vectors go through ``problem.residuals`` in one vectorised
-    call; parameters in ``values`` but not in ``names`` are held at their values.
+    call; parameters in ``values`` but not in ``names`` are held at their values. The steps
+    are the effects' ``steps`` times ``step_scale``.
     """
     effect_of = problem.parameter_effect
-    steps = np.array([effect_of[n].steps[effect_of[n].parameters.index(n)] for n in names])
+    steps = step_scale * np.array([effect_of[n].steps[effect_of[n].parameters.index(n)]
+                                   for n in names])
     k = len(names)
     batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
     for j, n in enumerate(names):
@@ -49,6 +52,29 @@ def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]
         column[k + j, 0] -= steps[j]
     r = problem.residuals(batch)
     return -((r[:k] - r[k:]) / (2.0 * steps[:, None])).T
+
+
+ROUNDOFF = 0.5
+"""A column is round-off when its estimates at two steps ``h`` and ``2h`` differ by more than
+this fraction of its norm (:func:`candidate_columns`)."""
+
+
+def candidate_columns(problem: Problem, values: Mapping[str, float], names: Sequence[str]
+                      ) -> FloatArray:
+    """:func:`jacobian` columns of candidate parameters, those that are round-off set to zero.
+
+    A parameter that changes the data gives the same column at steps ``h`` and ``2h`` (to
+    ``O(h^2)``); one that does not (it cancels, e.g. a common bias of relative readings) gives
+    the round-off of the residuals over ``2h``, which halves from ``h`` to ``2h``: the two
+    estimates then differ by about the column's own norm. Such a column is zero, so that its
+    candidate has "no effect" instead of an MDB of the round-off (1e9 arcsec and more) and an
+    influence on the model that is noise.
+    """
+    G = jacobian(problem, values, names)
+    wide = jacobian(problem, values, names, step_scale=2.0)
+    noise = np.linalg.norm(G - wide, axis=0) > ROUNDOFF * np.linalg.norm(G, axis=0)
+    G[:, noise] = 0.0
+    return G
 
 
 @ONE_THREAD
