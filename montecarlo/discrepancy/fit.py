@@ -66,9 +66,10 @@ def candidate_columns(problem: Problem, values: Mapping[str, float], names: Sequ
     A parameter that changes the data gives the same column at steps ``h`` and ``2h`` (to
     ``O(h^2)``); one that does not (it cancels, e.g. a common bias of relative readings) gives
     the round-off of the residuals over ``2h``, which halves from ``h`` to ``2h``: the two
-    estimates then differ by about the column's own norm. Such a column is zero, so that its
-    candidate has "no effect" instead of an MDB of the round-off (1e9 arcsec and more) and an
-    influence on the model that is noise.
+    estimates then differ by about the column's own norm. So do the differences of a parameter
+    whose derivative is zero here but not its higher ones (``k^3`` at ``k = 0`` gives ``h^2``
+    and ``4 h^2``). Such a column is zero, so that its candidate has "no effect" instead of an
+    MDB of the round-off (1e9 arcsec and more) and an influence on the model that is noise.
     """
     G = jacobian(problem, values, names)
     wide = jacobian(problem, values, names, step_scale=2.0)
