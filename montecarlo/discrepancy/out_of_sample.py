@@ -17,8 +17,7 @@ each model; for a named effect ``E`` the increase ``d_g = MS_g(without E) - MS_g
 the diagnosis's alpha; otherwise it *does not predict*. Groups are the unit (their
 prediction errors are independent given the training fits; points of one view share its
 fitted pose). An effect the data do not carry costs out-of-sample accuracy in expectation
-(over-fitting), so its ``d_g`` centre at or below zero and it is called "predicts" at most at
-rate alpha.
+(it is fitted to noise), so its ``d_g`` centre at or below zero.
 """
 
 from __future__ import annotations
