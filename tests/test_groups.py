@@ -21,11 +21,10 @@ from montecarlo.discrepancy.fit import fit_model
 from montecarlo.discrepancy.groups import (
     clustering,
     format_clustering,
-    format_leave_one_out,
     groups_of,
-    leave_one_group_out,
     one_way_anova,
 )
+from montecarlo.discrepancy.out_of_sample import format_leave_one_out, leave_one_group_out
 from montecarlo.discrepancy.problem import Effect, Problem
 
 
@@ -136,7 +135,14 @@ def test_leave_one_group_out_matches_lstsq() -> None:
             assert got["rms_sigma"] == pytest.approx(np.sqrt(np.mean(e ** 2)) / 0.1, rel=1e-6)
         pooled = np.sqrt(np.mean(np.concatenate(errors) ** 2))
         assert loo["models"][label]["rms"] == pytest.approx(pooled, rel=1e-6)
-    assert loo["models"]["without quad"]["verdict"] == "predicts"
+    # the rule: a paired t test of the per-group mean squares (scipy's), at the alpha of 0.01
+    per = {label: [loo["models"][label]["per_group"][str(k)]["rms_sigma"] ** 2
+                   for k in range(4)] for label in ("final model", "without quad")}
+    ref = stats.ttest_rel(per["without quad"], per["final model"], alternative="greater")
+    test = loo["models"]["without quad"]["test"]
+    assert (test["t"], test["p_value"]) == pytest.approx((ref.statistic, ref.pvalue))
+    assert loo["models"]["without quad"]["verdict"] == (
+        "predicts" if ref.pvalue < 0.01 else "does not predict")
     assert "without quad" in format_leave_one_out(loo)
 
 

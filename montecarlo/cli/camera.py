@@ -41,6 +41,10 @@ def _unit(unit: str) -> str:
     return "" if unit == "1" else f" {unit}"
 
 
+HELD_OUT = ("the left-out view's pose is fitted to that view alone, with the intrinsics and "
+            "distortion held at the values fitted on the other views: the standard "
+            "cross-validation of a camera calibration")
+
 RMS_CONVENTION = ("rms is per image coordinate (u and v pooled); the rms of the 2-D residual "
                   "of a point is sqrt(2) times larger")
 
@@ -117,11 +121,11 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         from montecarlo.discrepancy import camera_effects as cam
         from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError, fit_model
-        from montecarlo.discrepancy.groups import (
-            clustering,
-            format_clustering,
+        from montecarlo.discrepancy.groups import clustering, format_clustering
+        from montecarlo.discrepancy.out_of_sample import (
             format_leave_one_out,
             leave_one_group_out,
+            markdown_leave_one_out,
         )
         from montecarlo.discrepancy.significance import (
             format_significance,
@@ -174,7 +178,7 @@ def diagnose_camera(args: argparse.Namespace) -> int:
                    "clustering": clustering(d, groups, "view")})
     if args.leave_one_out:
         with steps("leave one view out", "two fits per view and model"):
-            report["leave_one_out"] = leave_one_group_out(d, view, groups, "view")
+            report["leave_one_out"] = leave_one_group_out(d, view, groups, "view", HELD_OUT)
     camera = report["camera"]
     lines = [format_text(report), "", RMS_CONVENTION,
              "camera (final model; Zhang's alpha, beta, gamma, u0, v0): " + ", ".join(
@@ -206,6 +210,8 @@ def diagnose_camera(args: argparse.Namespace) -> int:
             write_report(staging, d, view, report)
             md = ["# Diagnosis", "", "```", text, "```", "", "![residuals](residuals.png)", "",
                   "![gap](gap.png)", ""]
+            if args.leave_one_out:
+                md += markdown_leave_one_out(report["leave_one_out"], significance)
             extra = {} if det is None else _image_figures(Path(staging), det, d, md)
             atomic_write_bytes(Path(staging) / "report.md", "\n".join(md).encode())
             write_provenance(staging, "diagnose", **record)
@@ -419,7 +425,9 @@ def add_diagnose_parser(dsub: argparse._SubParsersAction,
                    "of a ground study (for montecarlo size|run --errors)")
     p.add_argument("--leave-one-out", action="store_true", help="out-of-sample evidence: "
                    "refit the final model (and it without each named effect) on all views but "
-                   "one, predict that view's corners (its pose fitted), for each view; slow: "
-                   "two fits per view and model")
+                   "one, predict that view's corners (its pose fitted to it alone, the "
+                   "intrinsics held), for each view; an effect predicts when leaving it out "
+                   "raises the prediction error (paired t test over the views at --alpha); "
+                   "slow: two fits per view and model")
     basic(p)
     p.set_defaults(func=diagnose_camera)
