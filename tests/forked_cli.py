@@ -89,10 +89,10 @@ def _run(request: dict) -> dict:
 
 def preload() -> None:
     """Import every module of the package (its commands import theirs on first use: SALib,
-    numba, pyarrow, matplotlib...) and pyplot, so that a child only runs its command. Importing
-    is all a module does at import time, so a child runs as a fresh ``python -m`` would; one
-    that cannot be imported here is left to the child, which reports it as ``python -m``
-    would."""
+    numba, pyarrow, matplotlib...) and pyplot, so that a child only runs its command. The
+    package's modules only define things when imported (none reads the environment, starts a
+    thread or writes a file), so a child runs as a fresh ``python -m`` would. A module that
+    cannot be imported here is left to the child, which fails on it as ``python -m`` would."""
     import matplotlib.pyplot  # noqa: F401
 
     import montecarlo
