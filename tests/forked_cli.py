@@ -2,11 +2,11 @@
 
 Used by the tests of the command line (:func:`montecarlo_cli`, and ``tests/test_bad_inputs.py``):
 most of a short command-line run, as a fresh process, is spent importing the libraries. This
-server imports them once; each request then forks a child that runs the package's ``__main__``
-exactly as ``python -m`` does (``runpy``, ``sys.argv``, exit code from ``SystemExit``, an
-uncaught exception printed as a traceback with exit code 1), in its own working directory and
-environment with its own stdin, stdout and stderr: a process of its own, as a test of exit
-codes, output and files written needs.
+server imports them, and every module of the package, once (:func:`preload`); each request
+then forks a child that runs the package's ``__main__`` exactly as ``python -m`` does
+(``runpy``, ``sys.argv``, exit code from ``SystemExit``, an uncaught exception printed as a
+traceback with exit code 1), in its own working directory and environment with its own stdin,
+stdout and stderr: a process of its own, as a test of exit codes, output and files written needs.
 
 Protocol: one JSON object per line on stdin, ``{"argv": [...], "cwd": DIR, "stdout": FILE,
 "stderr": FILE, "timeout": SECONDS, "env": {NAME: VALUE} or null}``; one JSON line back per
@@ -16,8 +16,11 @@ request, ``{"returncode": INT or null, "timed_out": BOOL}``. End of input ends t
 from __future__ import annotations
 
 import atexit
+import contextlib
+import importlib
 import json
 import os
+import pkgutil
 import runpy
 import signal
 import subprocess
@@ -84,13 +87,26 @@ def _run(request: dict) -> dict:
         time.sleep(0.002)
 
 
+def preload() -> None:
+    """Import every module of the package (its commands import theirs on first use: SALib,
+    numba, pyarrow, matplotlib...) and pyplot, so that a child only runs its command. The
+    package's modules only define things when imported (none reads the environment, starts a
+    thread or writes a file), so a child runs as a fresh ``python -m`` would. A module that
+    cannot be imported here is left to the child, which fails on it as ``python -m`` would."""
+    import matplotlib.pyplot  # noqa: F401
+
+    import montecarlo
+
+    for module in pkgutil.walk_packages(montecarlo.__path__, "montecarlo.",
+                                        onerror=lambda name: None):
+        if module.name != "montecarlo.__main__":  # the command line itself: the child's part
+            with contextlib.suppress(Exception):
+                importlib.import_module(module.name)
+
+
 def serve() -> None:
     """Answer requests on stdin until it closes."""
-    import pandas  # noqa: F401  (preloaded, like the package: what the children share)
-    import scipy.stats  # noqa: F401
-
-    import montecarlo.cli
-    import montecarlo.engine.runner  # noqa: F401
+    preload()
 
     replies = os.fdopen(os.dup(1), "w")
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # nothing of the server's own reaches replies

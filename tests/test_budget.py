@@ -15,6 +15,7 @@ from montecarlo.engine.distributions import Distribution
 from montecarlo.errors import InputError
 from montecarlo.seed000 import ground
 from montecarlo.systems import study_from_dict
+from tests.forked_cli import montecarlo_cli
 
 REQ = sp.Requirement(limit=3.0)
 
@@ -166,11 +167,12 @@ def test_budget_outputs(small_budget, tmp_path):
 
 
 def test_cli_budget(tmp_path):
-    out = subprocess.run(
-        [sys.executable, "-m", "montecarlo", "budget", "--limit", "3", "--samples", "256",
-         "--trials", "1000", "--relations", "independent", "--point", "L_m=25",
-         "--point", "H_m=10", "--point", "pixel_px=0.05", "--n-jobs", "1",
-         "--out", str(tmp_path / "b")], capture_output=True, text=True, timeout=600)
+    """A budget through the command line (forked from a process with the libraries imported),
+    and a refused knob in a fresh process of its own."""
+    out = montecarlo_cli(
+        "budget", "--limit", "3", "--samples", "256", "--trials", "1000", "--relations",
+        "independent", "--point", "L_m=25", "--point", "H_m=10", "--point", "pixel_px=0.05",
+        "--n-jobs", "1", "--out", tmp_path / "b", timeout=600)
     assert out.returncode == 0, out.stderr
     assert "pixel error independent" in out.stdout
     assert (tmp_path / "b" / "budget-independent.csv").exists()

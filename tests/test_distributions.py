@@ -173,18 +173,18 @@ variants = ["normalised"]
     ('{dist = "lognormal", median = 0.1, sigma_ln = 0.3}', stats.lognorm(0.3, scale=0.1).std()),
 ])
 def test_each_shape_runs_from_a_study_file(tmp_path, source, spread):
-    """Through the command line: the only error source is dx of the shape, so the spread of the
-    yaw error across trials follows the source's standard deviation."""
-    import subprocess
-    import sys
-
+    """Through the command line (a process forked from one with the libraries imported; a
+    fresh process refusing a bad shape is the next test): the only error source is dx of the
+    shape, so the spread of the yaw error across trials follows the source's standard
+    deviation."""
     import pandas as pd
+
+    from tests.forked_cli import montecarlo_cli
 
     def spread_of(text: str, name: str) -> float:
         path = tmp_path / f"{name}.toml"
         path.write_text(SHAPE_STUDY.format(dx=text))
-        done = subprocess.run([sys.executable, "-m", "montecarlo", "-q", "run", str(path),
-                               "--out", str(tmp_path / name)], capture_output=True, text=True)
+        done = montecarlo_cli("-q", "run", path, "--out", tmp_path / name)
         assert done.returncode == 0, done.stderr
         trials = pd.read_parquet(tmp_path / name / "trials.parquet")
         return float(trials["normalised/delta_psi_mrad"].std())

@@ -60,13 +60,20 @@ def test_pci_at_mib_within_3_points(case, figures, request):
     assert abs(out["pci_check"] - idf.PCI_TARGET) <= 0.03, out
 
 
-def run_cli(*args, timeout=600):
+def run_cli(*args, timeout=600, fresh=False):
+    """``python -m montecarlo diagnose ARGS`` in a bare environment: a fresh process if
+    ``fresh``, else one forked from a process with the libraries imported
+    (``tests/forked_cli.py``)."""
     import subprocess
     import sys
 
+    from tests.forked_cli import montecarlo_cli
+
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    if not fresh:
+        return montecarlo_cli("diagnose", *args, timeout=timeout, env=env)
     return subprocess.run([sys.executable, "-m", "montecarlo", "diagnose", *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+                          capture_output=True, text=True, timeout=timeout, env=env)
 
 
 def collimation_args(tmp_path):
@@ -79,7 +86,8 @@ def test_cli_identifiability_linear_json(tmp_path):
     """``diagnose collimation --identifiability`` (linear, 1000 sets): pci, mib, mib_mdb and
     their mode beside every testable candidate's MDB in the JSON; ``--check-sets`` without
     ``--identifiability`` is refused with one line and exit code 2, nothing written."""
-    out = run_cli(*collimation_args(tmp_path), "--check-sets", "5")
+    out = run_cli(*collimation_args(tmp_path), "--check-sets", "5", fresh=True)
+    assert "Traceback" not in out.stderr
     assert out.returncode == 2 and "--check-sets" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "d.json").exists()

@@ -19,6 +19,7 @@ from montecarlo.engine.aggregate import order_statistic_ranks
 from montecarlo.engine.runner import RunOptions, run_study, run_until_decided, uses_reference
 from montecarlo.errors import InputError
 from montecarlo.systems import study_from_dict
+from tests.forked_cli import montecarlo_cli
 
 STUDY = {
     "study": {"name": "plan-small", "system": "ground", "trials": 1000, "seed": 1},
@@ -163,32 +164,28 @@ def test_until_decided_stops_at_max_trials_and_needs_a_spec(tmp_path):
     capped = run_until_decided(study, QUIET, max_trials=2000)
     assert max(gp.trials for gp in capped.study.points) == 2000
     path = tmp_path / "nospec.toml"
-    subprocess.run([sys.executable, "-m", "montecarlo", "init", "ground", str(path)], check=True,
-                   capture_output=True)
+    assert montecarlo_cli("init", "ground", path).returncode == 0
     text = path.read_text()
     path.write_text(text[:text.index("[spec]")] + text[text.index("[[sweep]]"):])
-    done = subprocess.run([sys.executable, "-m", "montecarlo", "run", str(path),
-                           "--until-decided", "--out", str(tmp_path / "out")],
-                          capture_output=True, text=True)
+    done = montecarlo_cli("run", path, "--until-decided", "--out", tmp_path / "out")
     assert done.returncode == 2 and "--until-decided needs a [spec]" in done.stderr
     assert not (tmp_path / "out").exists()
 
 
 def test_plan_command_prints_and_writes_json(tmp_path):
     path = tmp_path / "plan.toml"
-    done = subprocess.run([sys.executable, "-m", "montecarlo", "init", "ground", str(path)],
-                          capture_output=True, text=True)
+    done = montecarlo_cli("init", "ground", path)
     assert done.returncode == 0, done.stderr
-    done = subprocess.run([sys.executable, "-m", "montecarlo", "-q", "plan", str(path),
-                           "--trials", "1000", "--width", "0.1", "--json"],
-                          capture_output=True, text=True)
+    done = montecarlo_cli("-q", "plan", path, "--trials", "1000", "--width", "0.1", "--json")
     assert done.returncode == 0, done.stderr
     data = json.loads(done.stdout)
     assert data["order_statistic_trials"][0] == {"k (k-th largest)": 1, "trials": 59}
     assert data["pilot_trials"] == 1000 and data["points"]
+    # a fresh process of its own: a refused flag is exit 2, one line, no traceback
     done = subprocess.run([sys.executable, "-m", "montecarlo", "plan", str(path),
                            "--level-width", "0.2"], capture_output=True, text=True)
     assert done.returncode == 2 and "--level-width" in done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
 
 
 @pytest.mark.parametrize("spec", [None, {"statistic": "max"}, {"statistic": "std"},
@@ -223,9 +220,7 @@ def test_every_plan_branch_runs_through_the_command_line(tmp_path, spec):
         """
     path = tmp_path / "plan.toml"
     path.write_text(textwrap.dedent(text))
-    done = subprocess.run([sys.executable, "-m", "montecarlo", "-q", "plan", str(path),
-                           "--trials", "400", "--coverage", "0.9", "--json"],
-                          capture_output=True, text=True)
+    done = montecarlo_cli("-q", "plan", path, "--trials", "400", "--coverage", "0.9", "--json")
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr and "Warning" not in done.stderr
     data = json.loads(done.stdout)

@@ -18,6 +18,7 @@ from montecarlo.engine import runner
 from montecarlo.engine.runner import RunOptions, run_study
 from montecarlo.seed000 import table1
 from montecarlo.systems import load_study
+from tests.forked_cli import montecarlo_cli
 
 ROOT = Path(__file__).parent.parent
 
@@ -167,18 +168,23 @@ def test_table1_study_reproduces_table1_module(tmp_path):
 
 
 def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
-    """Kill a run midway (SIGKILL), rerun it: it resumes and ends with identical results."""
+    """Kill a run midway (SIGKILL), rerun it: it resumes and ends with identical results.
+
+    The killed run is a fresh process of its own; the uninterrupted run and the rerun are
+    ``python -m montecarlo`` forked from a process with the libraries imported."""
     text = textwrap.dedent(SMALL).replace("trials = 3000", "trials = 4000") \
         .replace("block_size = 500", "block_size = 4000") \
         .replace('"geometry.L_m" = [50.0, 200.0]',
                  '"geometry.L_m" = [' + ", ".join(f"{x:.1f}" for x in range(30, 330, 10)) + "]")
     study = tmp_path / "resume.toml"
     study.write_text(text)
-    cmd = [sys.executable, "-m", "montecarlo", "run", str(study), "--n-jobs", "1", "--quiet"]
+    args = ["run", str(study), "--n-jobs", "1", "--quiet"]
     a, b = tmp_path / "a" / "out", tmp_path / "b" / "out"
-    subprocess.run([*cmd, "--out", str(a)], check=True, timeout=600)
+    first = montecarlo_cli(*args, "--out", a, timeout=600)
+    assert first.returncode == 0, first.stderr
 
-    proc = subprocess.Popen([*cmd, "--out", str(b)], start_new_session=True)
+    proc = subprocess.Popen([sys.executable, "-m", "montecarlo", *args, "--out", str(b)],
+                            start_new_session=True)
     ck_root = b.parent / ".checkpoints"
     deadline = time.time() + 300
     while time.time() < deadline and len(list(ck_root.glob("*/point-*.pkl"))) < 5:
@@ -190,7 +196,7 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
     assert not b.exists()  # no half-written results
     assert list(b.parent.glob(".out.tmp-*"))  # the killed run's staging directory is left
 
-    rerun = subprocess.run([*cmd, "--out", str(b)], capture_output=True, text=True, timeout=600)
+    rerun = montecarlo_cli(*args, "--out", b, timeout=600)
     assert rerun.returncode == 0, rerun.stderr
     assert "resuming" in rerun.stderr
     pd.testing.assert_frame_equal(pd.read_parquet(b / "summary.parquet"),
