@@ -514,17 +514,55 @@ def test_no_good_mirror_flagged_with_an_unrecorded_1_degree_roll(sim, side, sens
     assert c["clean"] >= 0.95 * 300
 
 
-def test_a_winner_whose_adapted_model_is_singular_is_not_adapted():
+def test_a_winner_whose_adapted_model_is_singular_is_adapted_with_a_roll_held():
     """A data set of an earlier second simulator (left, ccw, rolls at 2 x MDB) on which the
-    model adapted with ``ins_roll`` is singular in double precision (its column-normalised
-    design has a condition of 1.3e8, its normal matrix 1.7e16): the diagnosis goes on without
-    it, reports it as dropped (p = NaN) and the misfit as unexplained. Whether LAPACK finds
-    that normal matrix singular depends on its build; the fit's condition check does not."""
+    model adapted with every active parameter of ``ins_roll`` is singular in double precision
+    (its column-normalised design has a condition of 1.3e8, its normal matrix 1.7e16: a roll
+    common to the measured mirrors turns their relative headings as the central mirror's
+    theodolite azimuth does). The diagnosis holds the least separable roll at zero, as an
+    absorbed one, names ``ins_roll`` and explains the misfit; without that it dropped the
+    candidate and flagged a good mirror."""
     from pathlib import Path
 
     data = read_mirror_csv(Path(__file__).parent / "data" / "collimation_ins_roll_singular.csv",
                            sets=SETS + REFERENCE_SETS)
     turned, s, _ = pe.choose_conventions(data, SIGMA)
     d = diagnose(pe.procedure_problem(turned, SIGMA, s))
-    assert "ins_roll" in d.dropped and math.isnan(d.dropped["ins_roll"])
-    assert "ins_roll" not in d.named and d.unexplained
+    assert d.named == ["ins_roll"] and not d.outliers and not d.dropped
+    assert not d.unexplained
+    rolls = pe.roll_parameters(turned)
+    assert sum(n in d.after.names for n in rolls) == len(rolls) - 1
+
+
+def test_one_misread_azimuth_is_flagged_not_taken_for_a_roll(tmp_path):
+    """A relative file of the model's simulator (level mount, 2″ + 2″) with one measured
+    mirror's theodolite azimuth misread by 8 sigma. A roll at that pointing alone explains the
+    shift (it turns the offset about the INS axis: the heading moves by lambda times the roll,
+    and lambda is -0.7°), but the mirror's shift, fitted instead, leaves nothing significant in
+    the eleven rolls either: the mirror, with fewer parameters, is flagged and nothing named
+    (before, ``ins_roll`` was named and no mirror flagged)."""
+    data = make_data("model", "right", "cw", np.random.default_rng(2), tmp_path)
+    row = int(procedure_data(data).measured[2])
+    az = data.theodolite_az.copy()
+    az[row] += 8.0 * SIGMA / math.cos(data.theodolite_el[row])
+    d, _ = diagnosed(dataclasses.replace(data, theodolite_az=az))
+    assert [t.name for t in d.outliers] == [f"outlier:{data.mirror[row]}"]
+    assert d.named == []
+
+
+def test_rolls_absorbed_at_zero_are_freed_where_the_fit_separates_them(tmp_path):
+    """A relative file of the model's simulator with the mount rolling N(0, 1°) unrecorded at
+    every pointing, on which two rolls are absorbed where the rolls are zero (their columns
+    lie within 5 % of the offsets' and the other rolls': a roll moves the pitch by
+    ``-gamma`` there, by ``-lambda sin(roll)`` at 1°). Held at zero, they leave a misfit
+    (chi-square 256 on 8 degrees of freedom) blamed on a good mirror; the adapted model
+    separates them (chi-square 3 on 6), so they are fitted and no mirror is flagged."""
+    rng = np.random.default_rng(65)
+    for _ in range(29):
+        data = make_data("model", "right", "cw", rng, tmp_path, mount_roll_deg=1.0)
+    d, _ = diagnosed(data)
+    first = next(t for t in d.steps[0].tests if t.name == "ins_roll")
+    rolls = pe.roll_parameters(data)
+    assert len(first.active) == len(rolls) - 2
+    assert d.named == ["ins_roll"] and not d.outliers
+    assert all(n in d.after.names for n in rolls)

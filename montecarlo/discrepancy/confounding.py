@@ -58,7 +58,12 @@ def effect_for_observation(observation: CandidateTest, effects: Sequence[Candida
 
     An effect of ``effects`` (Holm-significant) explains the observation's signal when,
     fitted instead (linearised), it leaves the observation's shift insignificant at ``level``
-    (its family's share of ``alpha``, :func:`separated`). Several effects present together
+    (its family's share of ``alpha``, :func:`separated`), unless it has as many parameters as
+    the observation or more and the observation's shift, fitted instead, leaves no significant
+    signal at ``alpha`` in its columns: each then explains the other, and the observation,
+    which has the smaller p-value and no more parameters, is flagged (a roll per pointing
+    would otherwise take one bad reading for a roll at that pointing).
+    Several effects present together
     can concentrate their signal on the observations of largest leverage (an INS scale
     factor and a pitch bias at the outermost mirrors), so a pair of effects also explains it
     when, fitted together, they leave the shift insignificant at ``level`` while their own
@@ -68,7 +73,9 @@ def effect_for_observation(observation: CandidateTest, effects: Sequence[Candida
     """
     ranked = sorted(effects, key=lambda t: (t.log_p, t.dof))
     for t in ranked:
-        if not separated(observation, t, residual, level, absorbed):
+        if not separated(observation, t, residual, level, absorbed) and (
+                t.dof < observation.dof
+                or not _explains(observation.basis, t, residual, alpha, absorbed)):
             return t
     for t in ranked:
         for other in ranked:
@@ -80,6 +87,18 @@ def effect_for_observation(observation: CandidateTest, effects: Sequence[Candida
                                       absorbed):
                 return t
     return None
+
+
+def least_separable(test: CandidateTest) -> str | None:
+    """The active parameter of ``test`` that its other columns (projected orthogonal to the
+    model, each normalised) come closest to reproducing: the largest entry of the right
+    singular vector of the smallest singular value. None with fewer than two parameters."""
+    if test.projected is None or len(test.active) < 2:
+        return None
+    G = test.projected
+    norms = np.linalg.norm(G, axis=0)
+    _, _, vt = np.linalg.svd(G / np.where(norms > 0, norms, 1.0), full_matrices=False)
+    return test.active[int(np.argmax(np.abs(vt[-1])))]
 
 
 def _columns(projected: FloatArray) -> CandidateTest:

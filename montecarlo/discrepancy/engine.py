@@ -81,6 +81,7 @@ from montecarlo.discrepancy.candidate_tests import (
 )
 from montecarlo.discrepancy.confounding import (
     effect_for_observation,
+    least_separable,
     minimal_member,
     separated,
 )
@@ -284,15 +285,34 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             lo, hi = effect.bounds[effect.parameters.index(p)]
             start[p] = float(np.clip(v, lo, hi))
         tested = fit
-        try:
-            fit = _fit_with_fixed(full, (*fit.effects[1:], win.name), start,
-                                  fixed | (set(effect.parameters) - set(win.active)))
-        except (FitError, np.linalg.LinAlgError):
-            # the adapted model is singular with these data (an effect nearly degenerate with
-            # the model, e.g. a roll per pointing with the offsets' direction): not adapted
+        adapted = None
+        while adapted is None:
+            try:
+                adapted = _fit_with_fixed(full, (*tested.effects[1:], win.name), start,
+                                          fixed | (set(effect.parameters) - set(win.active)))
+            except (FitError, np.linalg.LinAlgError):
+                # the adapted model is singular with these data (an effect nearly degenerate
+                # with the model, e.g. a roll per pointing with the offsets' direction): hold
+                # its least separable parameter at zero, as an absorbed one, and refit
+                gauge = least_separable(win)
+                if gauge is None:
+                    break
+                win = replace(win, active=tuple(p for p in win.active if p != gauge))
+        if adapted is None:  # not even one parameter of it can be adapted
             dropped[win.name] = math.nan
             fit = tested
             continue
+        held = set(effect.parameters) - set(win.active) - fixed
+        if held:  # absorbed where the effect is zero, but separated where it is fitted?
+            try:
+                free = _fit_with_fixed(full, adapted.effects[1:], adapted.params, fixed)
+                if adapted.chi2 - free.chi2 > stats.chi2.isf(alpha, len(held)):
+                    adapted = free
+                    win = replace(win, active=tuple(q for q in effect.parameters
+                                                    if q not in fixed))
+            except (FitError, np.linalg.LinAlgError):
+                pass
+        fit = adapted
         fixed |= set(effect.parameters) - set(win.active)
         if is_outlier(win.name):
             outliers.append(win)
