@@ -37,8 +37,11 @@ snooping, Teunissen's DIA):
    estimated from the data (``noise_estimated``) the tests are F and Pope's tau
    (:mod:`montecarlo.discrepancy.estimated_sigma`).
 4. **Adapt**: add the winner's parameters, refit the nonlinear model, go back to 2 (a winner
-   whose adapted model is singular is not adapted but dropped, with p = NaN); stop when no
-   candidate is rejected.
+   whose adapted model is singular is refitted with its least separable parameter held at
+   zero, as an absorbed one, and dropped with p = NaN only if none of its parameters can be
+   fitted; parameters absorbed where the winner is zero are freed when the adapted model
+   separates them and they lower chi2 significantly at ``alpha``); stop when no candidate
+   is rejected.
 
 The *minimal detectable bias* (MDB) of a parameter is the size ``|b|`` at which the
 candidate's own test rejects with probability ``power`` (0.80) at its size in the family's
@@ -218,7 +221,8 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     step tests every observation's mean shift in the same family as the global test and the
     effects (:func:`detection_family`), and the winner is the effect or observation with the
     smallest p-value, unless an effect explains the observation's signal, alone or with one other
-    (:func:`effect_for_observation`): that effect comes first. A flagged observation gets its
+    (:func:`effect_for_observation`): that effect comes first (not an effect of no fewer
+    parameters whose signal the observation explains too). A flagged observation gets its
     shift parameters (it no longer weighs on the fit). After each
     effect is added, every named effect is tested given the others (Wald, Holm at ``alpha``);
     the least significant of those that are not is dropped and the model refitted, until all
