@@ -16,6 +16,7 @@ from scipy import stats
 
 from montecarlo.discrepancy import candidate_tests, engine
 from montecarlo.discrepancy.candidate_tests import analyse_candidates, holm
+from montecarlo.discrepancy.confounding import separated
 from montecarlo.discrepancy.engine import Diagnosis, diagnose
 from montecarlo.discrepancy.fit import FitError, fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem, with_outliers
@@ -697,16 +698,19 @@ def test_the_kink_replaces_flagged_shifts_beside_an_effect_with_an_absorbed_para
 # --- an effect that explains a winning observation comes first -----------------------------------
 
 
-@pytest.mark.parametrize(("left", "absorbed", "effect_first"),
+@pytest.mark.parametrize(("left", "absorbed", "explains"),
                          [(10.0, 0.05, True), (20.0, 0.05, False), (20.0, 0.5, True)])
 def test_an_effect_that_explains_the_observation_comes_first_at_alpha_over_n(left, absorbed,
-                                                                              effect_first):
+                                                                              explains):
     """The data: a spike at P7 only. Effect E's column (beside the line) correlates 0.894
     with P7's (rho^2 = 0.8) and the spike is set so that E, fitted instead, leaves ``left`` of
     chi-square in P7's column: P7 (T = left / 0.2) beats E (T = 0.8 left / 0.2) as the step's
-    smallest p-value. E comes first where ``left`` is below chi2 at alpha / n (40 testable
-    observations: 13.4; 10 is, 20 is not, though both exceed alpha's 6.63), or where P7's
-    column keeps less than ``absorbed`` of its norm beside E (sqrt(0.2) = 0.45 < 0.5)."""
+    smallest p-value. E explains P7's signal where ``left`` is below chi2 at alpha / n (40
+    testable observations: 13.4; 10 is, 20 is not, though both exceed alpha's 6.63), or where
+    P7's column keeps less than ``absorbed`` of its norm beside E (sqrt(0.2) = 0.45 < 0.5).
+    But P7's shift, fitted instead, leaves nothing in E's column (the data are the spike), and
+    E has as many parameters as P7: each explains the other, so P7, with the smaller p-value,
+    is flagged in all three cases (:func:`effect_for_observation`)."""
     rho2 = 0.8
     Q = np.linalg.qr(np.column_stack([ONE, X, np.eye(N)[7]]))[0]
     o = Q[:, 2] * np.sign(Q[7, 2])  # the unit column of P7 beside the line
@@ -717,17 +721,16 @@ def test_an_effect_that_explains_the_observation_comes_first_at_alpha_over_n(lef
     y = 0.3 + 0.5 * X + s * np.eye(N)[7] + noise(np.eye(N)[7], g)
     lo, hi = stats.chi2.isf([0.01, 0.01 / N], 1)
     assert lo < left and bool(left < hi) is (left == 10.0)
-    d = diagnose(linear(y, {"E": {"e": g}}, observations=True), absorbed=absorbed)
+    problem = linear(y, {"E": {"e": g}}, observations=True)
+    d = diagnose(problem, absorbed=absorbed)
     first = d.steps[0]
     by_name = {t.name: t for t in (*first.tests, *first.snoop)}
     assert by_name["outlier:P7"].statistic == pytest.approx(left / (1.0 - rho2), rel=1e-9)
     assert by_name["E"].statistic == pytest.approx(rho2 * left / (1.0 - rho2), rel=1e-9)
-    if effect_first:
-        assert first.winner == "E" and d.named == ["E"] and d.outliers == []
-        assert d.after.chi2 == pytest.approx(chi2_of(y, g)[0], rel=1e-9)
-    else:
-        assert first.winner == "outlier:P7" and d.named == []
-        assert [t.name for t in d.outliers] == ["outlier:P7"]
+    p7, e = by_name["outlier:P7"], by_name["E"]
+    assert separated(p7, e, d.before.residual, p7.level, absorbed) is not explains
+    assert first.winner == "outlier:P7" and d.named == []
+    assert [t.name for t in d.outliers] == ["outlier:P7"]
 
 
 # --- the final groups --------------------------------------------------------------------------
