@@ -240,7 +240,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
     retried = False
     while True:
         tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
-                                                  power, absorbed, noise_estimated)
+                                                  power, absorbed, noise_estimated, alpha)
         eligible = [t for t in (*tests, *snoop) if t.status == "testable"
                     and t.p_adjusted < alpha and t.name not in dropped]
         if not eligible and outliers and not retried:
@@ -324,7 +324,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
             named[named.index(out)] = into
         if swaps:  # the lists of what the final model absorbs or could miss are its own
             tests, snoop, global_p = detection_family(effects_view, outlier_view, fit, alpha,
-                                                      power, absorbed, noise_estimated)
+                                                      power, absorbed, noise_estimated, alpha)
             steps[-1] = Step(fit, tests, None, (), snoop, {}, global_p)
     final = steps[-1]
     absorbed_list = [t.name for t in final.tests if t.status == "absorbed"
@@ -338,7 +338,7 @@ def diagnose(problem: Problem, alpha: float = ALPHA, power: float = POWER,
 
 def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresFit,
                      alpha: float = ALPHA, power: float = POWER, absorbed: float = ABSORBED,
-                     noise_estimated: bool = False
+                     noise_estimated: bool = False, columns_below: float = math.inf
                      ) -> tuple[list[CandidateTest], list[CandidateTest], float]:
     """The tests of one step as one family under Holm's weighted procedure.
 
@@ -348,7 +348,10 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
     the effects' and observations' tests with ``p_adjusted`` over the whole family and their
     MDBs at their own first-step sizes, and the global test's adjusted p-value. With the
     noise estimated, the effects' tests are F tests, the observations' Pope's tau and the
-    global test the F test against every effect at once (:func:`global_f`).
+    global test the F test against every effect at once (:func:`global_f`). The
+    observations' columns (``basis``, ``projected``) are formed for those whose adjusted
+    p-value is below ``columns_below`` (all by default; the loop needs only those it can
+    name: on thousands of observations the columns of all are an n x n matrix per step).
     """
     kind = ("F", "tau") if noise_estimated else ("chi2", "chi2")
     tests = analyse_candidates(effects, fit, alpha, power, absorbed, test=kind[0])
@@ -357,7 +360,9 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
     _, obs_share = family_levels(alpha, len(members), has_obs)
     snoop = analyse_observations(observations, fit, alpha, power, absorbed,
                                  level=lambda k: obs_share / max(k, 1),
-                                 test=kind[1]) if has_obs else []
+                                 test=kind[1],
+                                 columns_below=math.inf if columns_below == math.inf else 0.0
+                                 ) if has_obs else []
     seen = [t for t in snoop if math.isfinite(t.statistic)]
     names = [t.name for t in (*members, *seen)]
     p = [t.p_value for t in (*members, *seen)]
@@ -371,9 +376,19 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
     adjusted = dict(zip(names, weighted_holm(p, w).tolist(), strict=True)) if p else {}
     global_p = adjusted.get("global", math.nan)
 
+    columns: dict[str, CandidateTest] = {}
+    wanted = {t.name for t in seen if adjusted[t.name] < columns_below} \
+        if columns_below < math.inf else set()
+    if wanted:
+        some = replace(observations, candidates=tuple(
+            c for c in observations.candidates if c.name in wanted))
+        columns = {t.name: t for t in analyse_observations(some, fit, absorbed=absorbed)}
+
     def update(ts: list[CandidateTest]) -> list[CandidateTest]:
-        return [replace(t, p_adjusted=adjusted[t.name]) if t.name in adjusted else t
-                for t in ts]
+        return [replace(t, p_adjusted=adjusted[t.name],
+                        **({"basis": columns[t.name].basis,
+                            "projected": columns[t.name].projected} if t.name in columns else {}))
+                if t.name in adjusted else t for t in ts]
 
     return update(tests), update(snoop), global_p
 
@@ -521,7 +536,6 @@ def _fit_with_fixed(problem: Problem, effects: Sequence[str], start: Mapping[str
                e.description)
         if set(e.parameters) & fixed else e
         for e in problem.candidates)
-    return fit_model(Problem(problem.system, problem.base, reduced, problem.residuals,
-                             problem.start, problem.unavailable), effects, start)
+    return fit_model(replace(problem, candidates=reduced), effects, start)
 
 
