@@ -54,10 +54,15 @@ START_IMAGE_NOISE = 0.1
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before any work, a --report directory or --json file that cannot be written,
-    --check-sets without --identifiability, and --identifiability with a noise left to
-    ``auto`` (its rates are those of the tests at a known noise)."""
+    --check-sets without --identifiability, --identifiability with a noise left to ``auto``
+    (its rates are those of the tests at a known noise) and --leave-one-out on the
+    procedure's relative readings (which share the reference readings' errors)."""
     if getattr(args, "check_sets", 0) and not args.identifiability:
         raise InputError("--check-sets: only with --identifiability")
+    if args.leave_one_out and getattr(args, "readings", None) == "reference":
+        raise InputError("--leave-one-out: only with --readings absolute (under the procedure "
+                         "every relative reading shares the reference readings' errors, so "
+                         "one mirror cannot be left out on its own)")
     if getattr(args, "identifiability", False):
         for flag in ("pixel_sigma_px", "survey_sigma_m", "angle_sigma_arcsec"):
             if getattr(args, flag, None) == "auto":
@@ -74,7 +79,7 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
                       preface: tuple[str, ...] = (),
                       groups: tuple[str, Sequence[str]] | None = None) -> int:
     """Print or write the diagnosis; ``groups``: (kind, the label of each observation) for the
-    test of residuals clustering by group."""
+    test of residuals clustering by group and for --leave-one-out."""
     from montecarlo.discrepancy.groups import clustering_by, format_clustering
     from montecarlo.discrepancy.view import format_text, to_json
     from montecarlo.output.provenance import provenance
@@ -83,6 +88,8 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
     grouped = None if groups is None else clustering_by(d, *groups)
     if grouped is not None:
         report["clustering"] = grouped
+    loo_text, loo_md = _leave_one_out(d, view, groups, report, steps) \
+        if args.leave_one_out and groups is not None else ([], [])
     record = {"input": source, "alpha": args.alpha, "seed": args.seed, "trials": args.trials}
     if getattr(args, "identifiability", False):
         from montecarlo.systems import identifiability
@@ -105,7 +112,7 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
                 mc = monte_carlo_gap(d, view, args.trials, args.seed, args.n_jobs) \
                     if args.trials > 0 else None
             with steps("the report's plots", "matplotlib"):
-                write_report(staging, d, view, report, mc, args.trials, args.seed)
+                write_report(staging, d, view, report, mc, args.trials, args.seed, loo_md)
             write_provenance(staging, "diagnose", **record)
             write_html_report(staging, d, view, mc)
     if emit_json(args, {**report, "provenance": provenance("diagnose", **record)}):
@@ -113,7 +120,7 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
         return 0
     print("\n".join([*preface, format_text(report),
                      *([format_clustering(report["clustering"])] if "clustering" in report
-                       else [])]))
+                       else []), *loo_text]))
     if "identifiability" in report:
         from montecarlo.systems.identifiability import format_table
 
@@ -123,6 +130,35 @@ def _diagnosis_output(args: argparse.Namespace, d: Diagnosis, view: SystemView,
               "residuals.png, gap.png)")
     steps.report(to_stderr=False)
     return 0
+
+
+def _leave_one_out(d: Diagnosis, view: SystemView, groups: tuple[str, Sequence[str]],
+                   report: dict, steps: Steps) -> tuple[list[str], list[str]]:
+    """--leave-one-out: each group (target, mirror) predicted from the others, with and without
+    each named effect, beside the effects' practical significance in sample; into ``report``
+    (keys ``leave_one_out``, ``practical_significance``); the text and Markdown lines."""
+    from montecarlo.discrepancy.groups import label_groups
+    from montecarlo.discrepancy.out_of_sample import (
+        format_leave_one_out,
+        leave_one_group_out,
+        markdown_leave_one_out,
+        no_table,
+    )
+    from montecarlo.discrepancy.significance import format_significance, practical_significance
+
+    kind, labels = groups
+    members = label_groups(labels)
+    why = no_table(d, members, kind)
+    if why is not None:
+        report["leave_one_out"] = {"kind": kind, "groups": list(members), "no_table": why}
+        return [why], [why, ""]
+    significance = practical_significance(d, view)
+    with steps(f"leave one {kind} out", f"a fit per {kind} and model, {len(members)} "
+               f"{kind}s"):
+        loo = leave_one_group_out(d, view, members, kind)
+    report.update({"practical_significance": significance, "leave_one_out": loo})
+    return ([format_significance(significance), format_leave_one_out(loo, significance)],
+            markdown_leave_one_out(loo, significance))
 
 
 def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
@@ -261,7 +297,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         p.add_argument("--alpha", type=probability, default=0.01,
                        help="significance of the tests (default 0.01)")
 
-    def common(p: argparse.ArgumentParser) -> None:
+    def common(p: argparse.ArgumentParser, kind: str, extra: str = "") -> None:
         basic(p)
         p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and "
                        "plots (residuals, gap, Monte Carlo of the residual statistic)")
@@ -282,6 +318,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        "whole diagnosis of N simulated data sets per size) at each "
                        "candidate's PCI size and linear MIB, as a check (default 0: none; "
                        "costly: 2 N diagnoses a candidate)")
+        p.add_argument("--leave-one-out", action="store_true", help="out-of-sample evidence: "
+                       f"refit the final model (and it without each named effect) on all "
+                       f"{kind}s but one and predict that {kind}, for each {kind}; an effect "
+                       "predicts when leaving it out raises the prediction error (paired t "
+                       f"test over the {kind}s at --alpha)" + extra)
         add_n_jobs_option(p)
 
     p = dsub.add_parser("ground", help="targets surveyed in frame b observed by the sensor")
@@ -297,7 +338,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    + AUTO_HELP + "; both auto: REML variance components")
     refraction_option(p, "standard coefficient of refraction of the base model, which also "
                       "has earth curvature")
-    common(p)
+    common(p, "target")
     p.set_defaults(func=_cmd_diagnose_ground)
 
     p = dsub.add_parser("collimation", help="autocollimator-INS mirror readings (seed 003)")
@@ -322,7 +363,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--roll-sigma-deg", type=positive, default=None, metavar="DEG",
                    help="size (1σ) of an unrecorded INS roll, the ins_roll candidate's prior "
                    "(--readings reference; default 2)")
-    common(p)
+    common(p, "mirror", "; only with --readings absolute")
     p.set_defaults(func=_cmd_diagnose_collimation)
 
     add_stabilization_diagnose_parser(dsub, basic)
