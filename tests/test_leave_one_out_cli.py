@@ -71,7 +71,7 @@ def _ground_prediction(data: GroundData, left: str, names: list[str]) -> np.ndar
 
     def subset(mask: np.ndarray) -> GroundData:
         return GroundData(tuple(np.array(data.targets)[mask]), data.positions[mask],
-                          data.pixels[mask], data.t[mask], None)
+                          data.pixels[mask], None, None)
 
     def residual(x: np.ndarray, part: GroundData) -> np.ndarray:
         predicted = ge.predict_pixels(dict(zip(keys, x, strict=True)), part, CAMERA, 0.13)
