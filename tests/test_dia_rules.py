@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from montecarlo.discrepancy import candidate_tests, engine
+from montecarlo.discrepancy import adapt, candidate_tests, confounding, engine
 from montecarlo.discrepancy.candidate_tests import analyse_candidates, holm
 from montecarlo.discrepancy.confounding import separated
 from montecarlo.discrepancy.engine import Diagnosis, diagnose
@@ -91,8 +91,8 @@ def test_one_effect_replaces_flagged_shifts_only_where_akaike_prefers_it(left, r
     assert with_ends - with_shifts == pytest.approx(left, rel=1e-9)
     assert with_ends < with_weak
     # 'slope' cannot be fitted beside the line (skipped); the others in this order
-    got = engine._effect_for_outliers(problem, fit, flagged, ["bow", "slope", "weak", "ends"],
-                                      set())
+    got = adapt.effect_for_outliers(problem, fit, flagged, ["bow", "slope", "weak", "ends"],
+                                    set())
     assert bool(aic(with_ends, 4) < aic(with_shifts, 5)) is replaced
     assert bool(aic(with_weak, 4) < aic(with_shifts, 5)) is replaced
     if not replaced:
@@ -178,7 +178,7 @@ def test_a_swap_to_fewer_parameters_gains_akaikes_two_per_parameter():
     problem = linear(y, CANDIDATES)
     fit = fit_model(problem, ("wide",))
     chi2, *_ = chi2_of(y, X**2)
-    final, swaps = engine._swap(problem, fit, ["wide"], ["cubic", "quadratic"], set())
+    final, swaps = adapt.swap(problem, fit, ["wide"], ["cubic", "quadratic"], set())
     assert [s[:2] for s in swaps] == [("wide", "quadratic")]
     assert swaps[0][2] == pytest.approx(aic(chi2, 4), rel=1e-9)
     assert swaps[0][3] == pytest.approx(aic(chi2, 3), rel=1e-9)
@@ -198,7 +198,7 @@ def test_a_swap_adding_parameters_needs_the_chi2_test_of_the_extra_ones(drop, sw
     fit = fit_model(problem, ("quadratic",))
     assert fit.chi2 - chi2_of(y, X**2, X**3)[0] == pytest.approx(drop, rel=1e-9)
     assert drop > 2.0 and bool(drop > stats.chi2.isf(0.01, 1)) is swapped
-    final, swaps = engine._swap(problem, fit, ["quadratic"], ["wide"], set())
+    final, swaps = adapt.swap(problem, fit, ["quadratic"], ["wide"], set())
     assert [s[:2] for s in swaps] == ([("quadratic", "wide")] if swapped else [])
     assert final.effects == ("line", "wide" if swapped else "quadratic")
 
@@ -220,8 +220,8 @@ def test_every_candidate_is_tried_and_the_lowest_criterion_wins():
                                                   ("exact", exact))}
     assert chi2["exact"] < chi2["rough"] < chi2["quadratic"]
     assert chi2["quadratic"] - chi2["exact"] == pytest.approx(4.0, rel=1e-9)
-    final, swaps = engine._swap(problem, fit, ["quadratic"], ["slope", "wide", "rough", "exact"],
-                                set())
+    final, swaps = adapt.swap(problem, fit, ["quadratic"], ["slope", "wide", "rough", "exact"],
+                              set())
     assert [s[:2] for s in swaps] == [("quadratic", "exact")]
     assert final.chi2 == pytest.approx(chi2["exact"], rel=1e-9)
 
@@ -233,12 +233,12 @@ def test_a_candidate_absorbed_by_the_model_replaces_only_an_effect_with_more_par
     y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2, X**3)
     problem = linear(y, CANDIDATES)
     cubic_fit = fit_model(problem, ("cubic",))
-    assert engine._swap(problem, cubic_fit, ["cubic"], [], set(), ["quadratic"])[1] == []
-    assert [s[:2] for s in engine._swap(problem, cubic_fit, ["cubic"], ["quadratic"],
-                                        set())[1]] == [("cubic", "quadratic")]
+    assert adapt.swap(problem, cubic_fit, ["cubic"], [], set(), ["quadratic"])[1] == []
+    assert [s[:2] for s in adapt.swap(problem, cubic_fit, ["cubic"], ["quadratic"],
+                                      set())[1]] == [("cubic", "quadratic")]
     wide_fit = fit_model(problem, ("wide",))
-    assert [s[:2] for s in engine._swap(problem, wide_fit, ["wide"], [], set(),
-                                        ["quadratic"])[1]] == [("wide", "quadratic")]
+    assert [s[:2] for s in adapt.swap(problem, wide_fit, ["wide"], [], set(),
+                                      ["quadratic"])[1]] == [("wide", "quadratic")]
 
 
 def test_the_result_of_an_effect_swapped_in_is_its_wald_test_in_the_final_model():
@@ -274,7 +274,7 @@ def test_a_named_effect_the_others_explain_is_dropped_and_the_rest_refitted():
     fit = fit_model(problem, ("quadratic", "cubic"))
     _, coef, cov = chi2_of(y, X**2, X**3)
     wald = [stats.chi2.sf(coef[k] ** 2 / cov[k, k], 1) for k in (2, 3)]
-    refit, gone = engine._reconsider(problem, fit, ["quadratic", "cubic"], set(), 0.01)
+    refit, gone = adapt.reconsider(problem, fit, ["quadratic", "cubic"], set(), 0.01)
     assert list(gone) == ["cubic"]
     assert gone["cubic"] == pytest.approx(holm(wald)[1], abs=1e-9)
     assert refit.effects == ("line", "quadratic")
@@ -287,12 +287,12 @@ def test_one_flagged_observation_is_tested_a_single_named_effect_is_not():
     y = 0.3 + 0.5 * X + 0.5 * X**3 + noise(X**3, np.eye(N)[7])
     problem = with_outliers(linear(y, CANDIDATES, observations=True))
     fit = fit_model(problem, ("cubic", "outlier:P7"))
-    refit, gone = engine._reconsider(problem, fit, ["cubic", "outlier:P7"], set(), 0.01)
+    refit, gone = adapt.reconsider(problem, fit, ["cubic", "outlier:P7"], set(), 0.01)
     assert list(gone) == ["outlier:P7"] and gone["outlier:P7"] == pytest.approx(1.0)
     assert refit.effects == ("line", "cubic")
     quiet = linear(0.3 + 0.5 * X + noise(), CANDIDATES)
     alone = fit_model(quiet, ("cubic",))
-    assert engine._reconsider(quiet, alone, ["cubic"], set(), 0.01)[1] == {}
+    assert adapt.reconsider(quiet, alone, ["cubic"], set(), 0.01)[1] == {}
 
 
 def test_a_refit_after_a_drop_keeps_absorbed_parameters_out():
@@ -300,8 +300,8 @@ def test_a_refit_after_a_drop_keeps_absorbed_parameters_out():
     Dropping the cubic beside it refits without the tilt (with it the design is singular)."""
     y = 0.3 + 0.5 * X + 5.0 * X**2 + noise(X**2, X**3)
     problem = linear(y, {"bend": {"t": 3.0 * X, "w": X**2}, "cubic": {"c": X**3}})
-    fit = engine._fit_with_fixed(problem, ["bend", "cubic"], {}, {"t"})
-    refit, gone = engine._reconsider(problem, fit, ["bend", "cubic"], {"t"}, 0.01)
+    fit = adapt.fit_with_fixed(problem, ["bend", "cubic"], {}, {"t"})
+    refit, gone = adapt.reconsider(problem, fit, ["bend", "cubic"], {"t"}, 0.01)
     assert list(gone) == ["cubic"] and refit.names == ("a", "b", "w")
 
 
@@ -589,8 +589,8 @@ def test_a_swap_beside_an_effect_with_an_absorbed_parameter_holds_it_at_zero():
     Z /= np.linalg.norm(Z)
     y = 0.3 + 0.5 * X + 5.0 * X**2 + 4.0 * Z + noise(X**2, X**3, Z)
     problem = linear(y, {**BEND, "cubic": {"c": X**3}, "zed": {"z": Z}})
-    fit = engine._fit_with_fixed(problem, ["bend", "cubic"], {}, {"t"})
-    final, swaps = engine._swap(problem, fit, ["bend", "cubic"], ["zed"], {"t"})
+    fit = adapt.fit_with_fixed(problem, ["bend", "cubic"], {}, {"t"})
+    final, swaps = adapt.swap(problem, fit, ["bend", "cubic"], ["zed"], {"t"})
     chi2, coef, _ = chi2_of(y, X**2, Z)
     assert fit.chi2 - chi2 == pytest.approx(16.0, rel=1e-9)
     assert [s[:2] for s in swaps] == [("cubic", "zed")]
@@ -608,8 +608,8 @@ def test_one_effect_replaces_flagged_shifts_beside_an_effect_with_an_absorbed_pa
         + noise(X**2, np.eye(N)[A_ROW], np.eye(N)[B_ROW])
     problem = with_outliers(linear(y, {**BEND, "ends": {"e": ENDS}}, observations=True))
     flagged = [f"outlier:P{A_ROW}", f"outlier:P{B_ROW}"]
-    fit = engine._fit_with_fixed(problem, ["bend", *flagged], {}, {"t"})
-    name, alt = engine._effect_for_outliers(problem, fit, flagged, ["ends"], {"t"})
+    fit = adapt.fit_with_fixed(problem, ["bend", *flagged], {}, {"t"})
+    name, alt = adapt.effect_for_outliers(problem, fit, flagged, ["ends"], {"t"})
     chi2, coef, _ = chi2_of(y, X**2, ENDS)
     assert name == "ends" and alt.names == ("a", "b", "w", "e")
     assert alt.chi2 == pytest.approx(chi2, rel=1e-9)
@@ -840,10 +840,10 @@ def test_the_stand_in_with_fewest_parameters_counting_its_partner_then_smallest_
     W, one, pair, twin, extra = analyse_candidates(problem, fit)
     assert stats.chi2.logsf(200.0, 2) < stats.chi2.logsf(100.0, 1)
     assert pair.log_p == twin.log_p < one.log_p
-    got = engine.minimal_member(W, [one, pair, twin], [extra], fit.residual)
+    got = confounding.minimal_member(W, [one, pair, twin], [extra], fit.residual)
     assert got is pair
-    assert engine.minimal_member(W, [one], [extra], fit.residual) is one
-    assert engine.minimal_member(W, [one], [], fit.residual) is None
+    assert confounding.minimal_member(W, [one], [extra], fit.residual) is one
+    assert confounding.minimal_member(W, [one], [], fit.residual) is None
 
 
 @pytest.mark.parametrize(("confounded", "stands_in"), [(0.9, True), (0.99, False)])
@@ -857,11 +857,11 @@ def test_a_stand_in_must_lie_inside_the_winner_at_the_level_given(confounded, st
     problem = linear(y, {"W": {"w1": P1, "w2": P2}, "near": {"n": near}})
     fit = fit_model(problem, ())
     W, inner = analyse_candidates(problem, fit)
-    assert engine.canonical_correlation(W, inner) == pytest.approx(0.95, rel=1e-9)
+    assert candidate_tests.canonical_correlation(W, inner) == pytest.approx(0.95, rel=1e-9)
     left = chi2_of(y, near)[0] - chi2_of(y, near, P1, P2)[0]
     assert left == pytest.approx(25.0 * (1.0 - 0.95**2), rel=1e-9)
     assert left < stats.chi2.isf(0.01, 2) / 3.0
-    got = engine.minimal_member(W, [inner], [], fit.residual, confounded=confounded)
+    got = confounding.minimal_member(W, [inner], [], fit.residual, confounded=confounded)
     assert (got is inner) is stands_in
 
 

@@ -16,7 +16,7 @@ import pytest
 
 from montecarlo.discrepancy import camera_effects as cam
 from montecarlo.discrepancy.candidate_tests import analyse_candidates
-from montecarlo.discrepancy.fit import fit_model
+from montecarlo.discrepancy.fit import fit_model, jacobian
 from montecarlo.discrepancy.observation_tests import analyse_observations
 from montecarlo.discrepancy.problem import with_outliers
 from montecarlo.io.camera_csv import CameraData, read_camera_csv
@@ -52,7 +52,9 @@ def _close(a: float, b: float) -> bool:
 def test_batched_observation_tests_equal_the_reference(snooping, test, absorbed):
     observations, fit = snooping
     level = lambda k: 0.002 / max(k, 1)  # noqa: E731
-    reference = analyse_candidates(observations, fit, absorbed=absorbed, level=level, test=test)
+    # the reference differentiates every column numerically, the shifts' too
+    reference = analyse_candidates(replace(observations, unit_columns={}), fit,
+                                   absorbed=absorbed, level=level, test=test)
     batched = analyse_observations(observations, fit, absorbed=absorbed, level=level, test=test)
     statuses = {t.status for t in reference}
     # the cases the batched path hands to the reference's code are exercised too
@@ -78,3 +80,40 @@ def test_batched_observation_tests_equal_the_reference(snooping, test, absorbed)
         # the same space: each basis projects the other's columns onto themselves
         assert b.basis.shape == a.basis.shape
         np.testing.assert_allclose(b.basis @ (b.basis.T @ a.basis), a.basis, atol=1e-12)
+
+
+def test_columns_only_below_the_threshold(snooping):
+    """With ``columns_below`` the projected columns and bases are those of the reference for the
+    observations whose own p-value is below it, None for the others; the statistics are
+    unchanged."""
+    observations, fit = snooping
+    every = analyse_observations(observations, fit)
+    p = np.sort([t.p_value for t in every if t.status == "testable"])
+    cut = float(np.sqrt(p[p.size // 2] * p[p.size // 2 + 1]))  # between two tests' p-values
+    some = analyse_observations(observations, fit, columns_below=cut)
+    below = 0
+    for a, b in zip(every, some, strict=True):
+        assert (a.statistic, a.p_value, a.mdb) == (b.statistic, b.p_value, b.mdb) or \
+            a.status != "testable"
+        if a.projected is not None and a.p_value < cut:
+            below += 1
+            np.testing.assert_array_equal(b.projected, a.projected)
+            np.testing.assert_allclose(b.basis, a.basis, atol=1e-14)
+        else:
+            assert b.projected is None and b.basis is None
+    assert below > 3
+
+
+def test_shift_columns_are_the_identity_rows_finite_differences_give(snooping):
+    """The exact columns of the observations' shifts equal central differences of the same
+    residual function (the problem without ``unit_columns``), with the model's columns."""
+    observations, fit = snooping
+    base = observations.base.parameters
+    names = [*base, *observations.candidates[0].parameters,
+             *observations.candidates[7].parameters]
+    values = {**fit.params, **dict.fromkeys(names[len(base):], 0.3)}
+    exact = jacobian(observations, values, names)
+    numeric = jacobian(replace(observations, unit_columns={}), values, names)
+    assert set(names[len(base):]) <= set(observations.unit_columns)
+    np.testing.assert_allclose(exact, numeric, atol=1e-8)
+    assert np.count_nonzero(exact[:, len(base):]) == 4

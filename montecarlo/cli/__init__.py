@@ -22,11 +22,13 @@ from montecarlo.cli import (
     seed000,
     stabilization,
     study,
+    synth,
 )
 from montecarlo.cli.common import EXIT_BAD_INPUT, Parser, verbosity
 from montecarlo.errors import InputError, RunInterrupted
 
-GROUPS = (study, authoring, seed000, collimation, stabilization, diagnose, camera, design)
+GROUPS = (study, authoring, seed000, collimation, stabilization, diagnose, synth, camera,
+          design)
 """Command modules, in the order their commands are listed by ``--help``."""
 
 

@@ -179,3 +179,9 @@ def write_provenance(directory: Path, kind: str, **record: object) -> None:
     atomic_write_bytes(Path(directory) / PROVENANCE,
                        (json.dumps(provenance(kind, **record), indent=2, default=str) + "\n")
                        .encode())
+
+
+def refraction_option(p: argparse.ArgumentParser, text: str) -> None:
+    p.add_argument("--refraction-k", type=number(float, low=-5.0, high=5.0), default=0.13,
+                   metavar="K", help=f"{text} [1] (default 0.13, Gauss's standard value)")
+

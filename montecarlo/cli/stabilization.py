@@ -1,10 +1,12 @@
-"""Seed 001: ``stabilization simulate | estimate | observability``."""
+"""Seed 001: ``stabilization simulate | estimate | observability``, and ``diagnose
+stabilization`` (the estimator's model of a recording against its candidates)."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -15,11 +17,21 @@ from montecarlo.cli.common import (
     emit_json,
     field_of_view,
     finite,
+    nonnegative,
     nonnegative_int,
     number,
     positive,
     positive_int,
 )
+from montecarlo.cli.noise_options import (
+    AUTO,
+    AUTO_HELP,
+    diagnose_stabilization_auto,
+    positive_or_auto,
+    report_entry,
+)
+from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
+from montecarlo.errors import InputError
 from montecarlo.units import ARCMIN, DEG_PER_HOUR, DEG_PER_ROOT_HOUR
 
 
@@ -266,3 +278,94 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     _add_stabilization_profile(obs)
     _add_stabilization_camera(obs)
     obs.set_defaults(func=_cmd_stabilization_observability)
+
+
+START_IMAGE_NOISE = 0.1
+"""Image noise [px] the estimator's start and the first pass use under ``auto``."""
+
+
+def diagnose_stabilization(args: argparse.Namespace) -> int:
+    steps = Steps()
+    with steps("loading", LIBRARIES):
+        from montecarlo.discrepancy import stabilization_effects as ste
+        from montecarlo.discrepancy.engine import diagnose
+        from montecarlo.discrepancy.fit import FitError
+        from montecarlo.discrepancy.view import format_text, to_json
+        from montecarlo.geometry.camera import Camera
+        from montecarlo.io.stabilization_csv import read_csv
+        from montecarlo.output.provenance import provenance
+        from montecarlo.seed001 import estimate as se
+        from montecarlo.units import DEG_PER_ROOT_HOUR
+
+    check_json_option(args)
+    with steps("reading the recording", "a CSV row per sample"):
+        record = read_csv(args.data)
+    camera = Camera.from_degrees(args.fov_deg, args.fov_deg, args.pixels, args.pixels)
+    gyro_noise = args.gyro_arw_deg_per_rt_h * DEG_PER_ROOT_HOUR
+    n = len(record.t)
+    image_noise = START_IMAGE_NOISE if args.image_noise_px == AUTO else args.image_noise_px
+    noise = None
+    try:
+        with steps("the estimator's start", f"recursive least squares over the {n} samples, "
+                   "then the image walk's Kalman whitening"):
+            est = se.estimate(record.t, record.gyro, record.eta, record.eps, record.los_px,
+                              camera, image_noise, gyro_noise, mount=args.mount,
+                              gyro_sampling=args.gyro_sampling)
+            problem = ste.stabilization_problem(record, camera, image_noise, gyro_noise,
+                                                args.mount, args.gyro_sampling, est)
+        with steps("the diagnosis", fit_why(2 * n, len(problem.base.parameters))):
+            if args.image_noise_px == AUTO:
+                d, used, found = diagnose_stabilization_auto(
+                    lambda s: ste.stabilization_problem(record, camera, s, gyro_noise,
+                                                        args.mount, args.gyro_sampling, est),
+                    gyro_noise, image_noise, args.alpha)
+                image_noise = used["image_noise_px"]
+                noise = report_entry(used, found)
+            else:
+                d = diagnose(problem, args.alpha)
+    except FitError as exc:
+        raise InputError(f"{args.data}: {exc}") from None
+    report = to_json(d, ste.report_view(record, camera, args.mount, args.gyro_sampling),
+                     str(args.data))
+    if noise is not None:
+        report["noise_estimate"] = noise
+    else:
+        report["stated_noise"] = {"image noise px": image_noise}
+    check = ste.convention_check(record, camera, image_noise, gyro_noise, args.mount,
+                                 args.gyro_sampling, d.before, args.alpha)
+    report["conventions"] = conventions_json(check)
+    record_args = {"input": str(args.data), "alpha": args.alpha, "mount": args.mount,
+                   "gyro_sampling": args.gyro_sampling, "image_noise_px": args.image_noise_px,
+                   "gyro_arw_deg_per_rt_h": args.gyro_arw_deg_per_rt_h}
+    if emit_json(args, {**report, "provenance": provenance("diagnose", **record_args)}):
+        steps.report(to_stderr=True)
+        return 0
+    print(format_text(report))
+    for line in conventions_text(report["conventions"]):
+        print(line)
+    steps.report(to_stderr=False)
+    return 0
+
+def add_diagnose_parser(dsub: argparse._SubParsersAction,
+                        basic: Callable[[argparse.ArgumentParser], None]) -> None:
+    """``diagnose stabilization``: the estimator's model of a recording against its
+    candidates."""
+    p = dsub.add_parser("stabilization", help="gyro indirect-stabilisation run (seed 001): "
+                        "the estimator's model against a scale factor, delays, the camera mount")
+    p.add_argument("data", help="CSV: t_s, gyro_x, gyro_y, gyro_z, eta_rad, eps_rad, "
+                   "los_x_px, los_z_px")
+    p.add_argument("--fov-deg", type=field_of_view, default=5.0,
+                   help="square field of view [deg] (5)")
+    p.add_argument("--pixels", type=positive_int, default=1024,
+                   help="pixels across the image (1024)")
+    p.add_argument("--image-noise-px", type=positive_or_auto, default=0.1,
+                   help="image noise per axis [px] (0.1)" + AUTO_HELP + " (the gyro walk "
+                   "known)")
+    p.add_argument("--gyro-arw-deg-per-rt-h", type=nonnegative, default=0.01,
+                   help="gyro angle random walk [deg/sqrt(h)] (0.01; 0: no LOS walk)")
+    p.add_argument("--mount", choices=("patent", "inner-gimbal"), default="patent",
+                   help="camera mount of the base model (patent)")
+    p.add_argument("--gyro-sampling", choices=("point", "interval-mean"), default="point",
+                   help="what a gyro row holds (point)")
+    basic(p)
+    p.set_defaults(func=diagnose_stabilization)

@@ -37,21 +37,34 @@ def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]
              step_scale: float = 1.0) -> FloatArray:
     """Whitened design columns ``-d residual / d parameter`` by central differences, (n, k).
 
-    All ``2k`` perturbed parameter vectors go through ``problem.residuals`` in one vectorised
-    call; parameters in ``values`` but not in ``names`` are held at their values. The steps
-    are the effects' ``steps`` times ``step_scale``.
+    All perturbed parameter vectors go through ``problem.residuals`` in one vectorised call;
+    parameters in ``values`` but not in ``names`` are held at their values. The steps are the
+    effects' ``steps`` times ``step_scale``. A parameter of ``problem.unit_columns`` gets its
+    exact column (a row of the identity) instead.
     """
     effect_of = problem.parameter_effect
-    steps = step_scale * np.array([effect_of[n].steps[effect_of[n].parameters.index(n)]
-                                   for n in names])
-    k = len(names)
+    unit = problem.unit_columns
+    varied = [j for j, n in enumerate(names) if n not in unit]
+    steps = step_scale * np.array([effect_of[names[j]].steps[
+        effect_of[names[j]].parameters.index(names[j])] for j in varied])
+    k = len(varied)
     batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
+    for i, j in enumerate(varied):
+        column = batch.setdefault(names[j], np.zeros((2 * k, 1)))
+        column[i, 0] += steps[i]
+        column[k + i, 0] -= steps[i]
+    if k:
+        r = problem.residuals(batch)
+        n_obs = r.shape[-1]
+    else:
+        n_obs = problem.residuals(dict(values)).size
+    J = np.zeros((n_obs, len(names)))
+    if k:
+        J[:, varied] = -((r[:k] - r[k:]) / (2.0 * steps[:, None])).T
     for j, n in enumerate(names):
-        column = batch.setdefault(n, np.zeros((2 * k, 1)))
-        column[j, 0] += steps[j]
-        column[k + j, 0] -= steps[j]
-    r = problem.residuals(batch)
-    return -((r[:k] - r[k:]) / (2.0 * steps[:, None])).T
+        if n in unit:
+            J[unit[n], j] = 1.0
+    return J
 
 
 ROUNDOFF = 0.5

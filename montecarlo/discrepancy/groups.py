@@ -54,12 +54,19 @@ def one_way_anova(values: FloatArray, cells: IntArray) -> dict[str, float]:
             "within_sd": float(np.sqrt(ms_within))}
 
 
-def groups_of(labels: Sequence[str]) -> dict[str, list[int]] | None:
-    """Observations (0-based) of each label, in order of first appearance; None when the data
-    have no groups to compare (fewer than two labels, or one observation per label)."""
+def label_groups(labels: Sequence[str]) -> dict[str, list[int]]:
+    """Observations (0-based) of each label, in order of first appearance (a label seen once
+    is a group of one: a target observed once can still be left out)."""
     out: dict[str, list[int]] = {}
     for i, label in enumerate(labels):
         out.setdefault(str(label), []).append(i)
+    return out
+
+
+def groups_of(labels: Sequence[str]) -> dict[str, list[int]] | None:
+    """:func:`label_groups`, or None when the data have no groups to compare (fewer than two
+    labels, or one observation per label)."""
+    out = label_groups(labels)
     if len(out) < 2 or len(out) == len(labels):
         return None
     return out

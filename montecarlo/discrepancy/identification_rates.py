@@ -23,7 +23,7 @@ smaller candidate inside the winner's columns that explains its signal, alone or
 other, is named instead (the engine's
 :func:`~montecarlo.discrepancy.confounding.minimal_member`, its tests quadratic forms of the
 misclosures too). The bases, degrees of freedom, weights and statuses are the engine's
-(:func:`~montecarlo.discrepancy.engine.detection_family` at the noise-free fit of the design);
+(:func:`~montecarlo.discrepancy.detect.detection_family` at the noise-free fit of the design);
 only the per-set statistics are computed here, for a batch of sets by one matrix product.
 
 Not reproduced: an effect that explains a flagged observation's signal, adapted before the
@@ -57,7 +57,7 @@ from montecarlo.discrepancy.candidate_tests import (
     log_chi2_sf_asymptotic,
 )
 from montecarlo.discrepancy.confounding import contained
-from montecarlo.discrepancy.engine import detection_family
+from montecarlo.discrepancy.detect import detection_family
 from montecarlo.discrepancy.fit import jacobian
 from montecarlo.discrepancy.problem import Problem, with_outliers
 from montecarlo.lsq import LeastSquaresFit

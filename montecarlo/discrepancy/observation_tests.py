@@ -7,7 +7,10 @@ Each observation that can be wrong on its own is a candidate of the DIA engine
 decomposition of its own: with ``Q`` an orthonormal basis of the model's columns (one SVD per
 step, shared by every observation), ``Gbar = E - Q Q_R'`` (``Q_R`` the observation's rows of
 ``Q``), and the statistic, estimate, MDB and influence of every observation follow from its
-``q x q`` normal matrix ``Gbar'Gbar``, batched over the observations.
+``q x q`` normal matrix ``Gbar'Gbar``, batched over the observations. The projected columns
+and their bases themselves (``n x q`` each, ``n x n`` for all observations together) are formed
+only for the observations whose test is below ``columns_below`` (the engine asks for those its
+identification can pick; a test's adjusted p-value is never below its own).
 
 :func:`analyse_observations` gives what :func:`~montecarlo.discrepancy.candidate_tests.
 analyse_candidates` gives for the same candidates (the literal reference, one candidate at a
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,11 +51,13 @@ FloatArray = NDArray[np.float64]
 
 def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
                          power: float = POWER, absorbed: float = ABSORBED,
-                         level: Callable[[int], float] | None = None, test: str = "chi2"
-                         ) -> list[CandidateTest]:
+                         level: Callable[[int], float] | None = None, test: str = "chi2",
+                         columns_below: float = math.inf) -> list[CandidateTest]:
     """:func:`~montecarlo.discrepancy.candidate_tests.analyse_candidates` of a problem whose
     candidates are all observations' shifts (:func:`~montecarlo.discrepancy.problem.
-    with_outliers`), batched (module docstring). ``test`` is "chi2" or "tau" (or "F")."""
+    with_outliers`), batched (module docstring). ``test`` is "chi2" or "tau" (or "F"). The
+    ``basis`` and ``projected`` columns are given for tests whose p-value is below
+    ``columns_below`` (all by default), None for the others."""
     rows_of = {f"{OUTLIER}{oid}": rows for oid, _, rows in problem.observations}
     A, r = fit.jacobian, fit.residual
     Q = _orthonormal(A)
@@ -70,9 +76,6 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
     if any(len(rw) != len(c.parameters) for rw, c in zip(rows, pending, strict=True)):
         raise ValueError("an observation's shift needs one parameter per residual row")
     flat = np.array([i for rw in rows for i in rw], dtype=np.int64)
-    # the projected columns of every observation at once: E - Q Q_R', one column per parameter
-    projected = -(Q @ Q[flat].T)
-    projected[flat, np.arange(flat.size)] += 1.0
     Qf = Q[flat]
     kept = np.sqrt(np.maximum(1.0 - np.einsum("ij,ij->i", Qf, Qf), 0.0))  # |e - Q q|^2 = 1 - |q|^2
     Pr = r[flat] - Qf @ (Q.T @ r)
@@ -90,8 +93,8 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
             work.append(k)
             continue
         G = _unit_columns(r.size, rows[k])
-        _, retained, absorbed_by, active = absorption(c, G, projected[:, cols], A, fit.names,
-                                                      absorbed)
+        _, retained, absorbed_by, active = absorption(c, G, _projected(Q, Qf, flat, cols), A,
+                                                      fit.names, absorbed)
         if not active:
             tests[c.name] = CandidateTest(c.name, "absorbed", retained=retained,
                                           absorbed_by=absorbed_by,
@@ -106,11 +109,13 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
     for k, (active, retained, absorbed_by) in irregular.items():
         cols = slice(start[k], start[k + 1])
         tests[pending[k].name], log_p[k] = candidate_statistics(
-            pending[k], active, _unit_columns(r.size, rows[k]), projected[:, cols], retained,
-            absorbed_by, fit, size, power, test)
+            pending[k], active, _unit_columns(r.size, rows[k]), _projected(Q, Qf, flat, cols),
+            retained, absorbed_by, fit, size, power, test)
+        if not (columns_below > 0 and log_p[k] < math.log(columns_below)):
+            tests[pending[k].name] = replace(tests[pending[k].name], basis=None, projected=None)
     for q, members in groups.items():
-        batch = _batch(pending, members, q, start, flat, projected, Q, Qf, Pr, kept, fit,
-                       size, power, test)
+        batch = _batch(pending, members, q, start, flat, Q, Qf, Pr, kept, fit, size, power,
+                       test, columns_below)
         for k, t, lp in zip(members, *batch, strict=True):
             tests[pending[k].name], log_p[k] = t, lp
     if work:
@@ -119,6 +124,16 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
             t = tests[pending[k].name]
             tests[t.name] = CandidateTest(**{**t.__dict__, "p_adjusted": float(p)})
     return [tests[c.name] for c in problem.candidates]
+
+
+def _projected(Q: FloatArray, Qf: FloatArray, flat: NDArray[np.int64],
+               cols: slice | NDArray[np.int64]) -> FloatArray:
+    """The projected columns ``E - Q Q_R'`` of parameters ``cols`` (indices into ``flat``, the
+    residual row of each parameter), shape (n, len(cols))."""
+    columns = -(Q @ Qf[cols].T)
+    index = np.atleast_1d(np.arange(flat.size)[cols])
+    columns[flat[index], np.arange(index.size)] += 1.0
+    return columns
 
 
 def _unit_columns(n: int, rows: list[int]) -> FloatArray:
@@ -144,12 +159,14 @@ def _all_kept(Qf: FloatArray, start: NDArray[np.int64], kept: FloatArray,
     ``N_jj - N_jo N_oo^-1 N_oj = 1 / (N^-1)_jj``, computed for all observations of one size
     at once."""
     sizes = np.diff(start)
-    out = [bool(np.all(kept[start[k]:start[k + 1]] >= absorbed)) for k in range(sizes.size)]
+    if not sizes.size:
+        return []
+    out = np.minimum.reduceat(kept >= absorbed, start[:-1]).tolist()
     for q in set(sizes[sizes > 1].tolist()):
-        members = [k for k in np.flatnonzero(sizes == q) if out[k]]
-        if not members:
+        members = np.array([k for k in np.flatnonzero(sizes == q) if out[k]], np.int64)
+        if not members.size:
             continue
-        cols = np.concatenate([np.arange(start[k], start[k] + q) for k in members])
+        cols = (start[members][:, None] + np.arange(q)).reshape(-1)
         N = _gram(Qf, cols, q)
         det_ok = np.linalg.cond(N) < 1.0 / np.finfo(float).eps
         rest = np.zeros((len(members), q))
@@ -160,12 +177,12 @@ def _all_kept(Qf: FloatArray, start: NDArray[np.int64], kept: FloatArray,
 
 
 def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.int64],
-           flat: NDArray[np.int64], projected: FloatArray, Q: FloatArray, Qf: FloatArray,
-           Pr: FloatArray, kept: FloatArray, fit: LeastSquaresFit, size: float, power: float,
-           test: str
-           ) -> tuple[list[CandidateTest], list[float]]:
-    """The tests of observations with ``q`` parameters, none absorbed, at once."""
-    cols = np.concatenate([np.arange(start[k], start[k] + q) for k in members])
+           flat: NDArray[np.int64], Q: FloatArray, Qf: FloatArray, Pr: FloatArray,
+           kept: FloatArray, fit: LeastSquaresFit, size: float, power: float, test: str,
+           columns_below: float) -> tuple[list[CandidateTest], list[float]]:
+    """The tests of observations with ``q`` parameters, none absorbed, at once; the columns
+    of those below ``columns_below``."""
+    cols = (start[members][:, None] + np.arange(q)).reshape(-1)
     N = _gram(Qf, cols, q)
     cov = np.linalg.inv(N)
     b = Pr[cols].reshape(len(members), q)
@@ -204,7 +221,13 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
     shift = (fit.covariance @ fit.jacobian[flat[cols]].T).reshape(
         len(fit.names), len(members), q) * mdb
     influence = np.max(np.abs(shift), axis=2)  # (p, K)
-    basis = _bases(N, Q, Qf, cols, flat)
+    wanted = np.flatnonzero(log_p < math.log(columns_below)) if columns_below > 0 else \
+        np.zeros(0, np.int64)
+    if wanted.size:
+        picked = cols.reshape(len(members), q)[wanted].reshape(-1)
+        basis = _bases(N[wanted], Q, Qf, picked, flat)
+        projected = _projected(Q, Qf, flat, picked)
+    slot = {int(i): j for j, i in enumerate(wanted)}
     stderr = np.sqrt(np.einsum("kii->ki", cov))
     bound = np.array([[max(abs(lo), abs(hi)) for lo, hi in pending[k].bounds] for k in members])
     with np.errstate(invalid="ignore"):
@@ -225,9 +248,9 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
             dict(zip(names, stderr[i].tolist(), strict=True)),
             dict(zip(names, mdb[i].tolist(), strict=True)),
             dict(zip(fit.names, influence[:, i].tolist(), strict=True)),
-            lam0, reason, size, basis[:, i * q:(i + 1) * q],
-            projected[:, start[k]:start[k] + q], test,
-            dof2))
+            lam0, reason, size, *((basis[:, slot[i] * q:(slot[i] + 1) * q].copy(),
+                                   projected[:, slot[i] * q:(slot[i] + 1) * q].copy())
+                                  if i in slot else (None, None)), test, dof2))
     return out, log_p.tolist()
 
 

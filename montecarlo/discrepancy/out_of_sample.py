@@ -17,7 +17,9 @@ each model; for a named effect ``E`` the increase ``d_g = MS_g(without E) - MS_g
 the diagnosis's alpha; otherwise it *does not predict*. Groups are the unit (their
 prediction errors are independent given the training fits; points of one view share its
 fitted pose). An effect the data do not carry costs out-of-sample accuracy in expectation
-(it is fitted to noise), so its ``d_g`` centre at or below zero.
+(it is fitted to noise), so its ``d_g`` centre at or below zero. A group whose observations are
+all flagged is not a group here; with fewer than :data:`MIN_GROUPS` groups left, or no named
+effect, there is no table (:func:`no_table` says why).
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ RULE = ("an effect predicts when leaving it out raises the left-out {kind}s' mea
         "prediction error: one-sided paired t test over the {k} {kind}s (t on {dof} dof) at "
         "alpha = {alpha:g}")
 FINAL = "final model"
+MIN_GROUPS = 3
+"""Fewest groups for a table: the paired t test then has at least 2 degrees of freedom."""
 
 
 def _flagged(d: Diagnosis) -> set[str]:
@@ -115,6 +119,30 @@ def _rms(x: Sequence[FloatArray]) -> float:
     return float(np.sqrt(np.mean(np.concatenate([np.ravel(v) for v in x]) ** 2)))
 
 
+def _named(d: Diagnosis) -> list[str]:
+    return [e for e in d.after.effects[1:] if not is_outlier(e)]
+
+
+def _usable(d: Diagnosis, groups: Mapping[str, Sequence[int]]) -> dict[str, Sequence[int]]:
+    """The groups with an observation not flagged."""
+    skip = _flagged(d)
+    return {g: ms for g, ms in groups.items() if _rows(d.problem, ms, skip)}
+
+
+def no_table(d: Diagnosis, groups: Mapping[str, Sequence[int]], kind: str) -> str | None:
+    """Why :func:`leave_one_group_out` gives no table for these groups (None: it does)."""
+    usable = len(_usable(d, groups))
+    if usable < MIN_GROUPS:
+        flagged = " not flagged" if usable < len(groups) else ""
+        return (f"leave one {kind} out: no table: {usable} {kind}s{flagged}, at least "
+                f"{MIN_GROUPS} needed (the paired t test over {kind}s needs 2 degrees of "
+                "freedom)")
+    if not _named(d):
+        return (f"leave one {kind} out: no table: the diagnosis named no effect, so none is "
+                "left out")
+    return None
+
+
 def prediction_test(increase: Sequence[float], alpha: float) -> dict[str, Any]:
     """The rule of the module docstring on the per-group increases ``d_g`` of the mean square
     prediction error [σ²]: mean, standard deviation, how many groups are predicted worse
@@ -145,7 +173,8 @@ def leave_one_group_out(d: Diagnosis, view: SystemView, groups: Mapping[str, Seq
     module docstring); flagged observations are left out of fits and predictions.
     ``held_out`` says in words how the left-out group is predicted (for the reports)."""
     skip = _flagged(d)
-    final = [e for e in d.after.effects[1:] if not is_outlier(e)]
+    groups = _usable(d, groups)
+    final = _named(d)
     models = {FINAL: final, **{f"without {e}": [x for x in final if x != e] for e in final}}
     everyone = [m for ms in groups.values() for m in ms]
     A = jacobian(d.problem, {k: v for k, v in d.after.params.items() if not is_outlier(k)},
@@ -153,9 +182,11 @@ def leave_one_group_out(d: Diagnosis, view: SystemView, groups: Mapping[str, Seq
     locals_ = {g: _local(d, A, ms) for g, ms in groups.items()}
     out: dict[str, Any] = {
         "kind": kind, "groups": list(groups), "rms_unit": view.rms_unit,
-        "held_out": held_out or (f"the left-out {kind}'s own parameters (those no other "
-                                 f"{kind}'s residual depends on) fitted to it alone, "
-                                 "everything else held at the values fitted on the others"),
+        "held_out": held_out or (
+            f"the left-out {kind}'s own parameters (those no other {kind}'s residual depends "
+            "on) fitted to it alone, everything else held at the values fitted on the others"
+            if any(locals_.values()) else f"every parameter fitted on the other {kind}s, none "
+            f"being the left-out {kind}'s own"),
         "own_parameters": locals_,
         "rule": RULE.format(kind=kind, k=len(groups), dof=len(groups) - 1, alpha=d.alpha),
         "alpha": d.alpha, "models": {}}

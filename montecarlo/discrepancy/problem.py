@@ -74,6 +74,9 @@ class Problem:
     requires : candidate name -> the candidate that must be in the model before it is tested
         (a hierarchy such as radial distortion's k1, then k2, then k3); until then it is
         reported ``unavailable``.
+    unit_columns : parameter -> the one whitened residual it shifts, ``r - b`` (an
+        observation's shift, :func:`with_outliers`): its Jacobian column is that row of the
+        identity, exactly, and is not differentiated numerically.
     """
 
     system: str
@@ -85,6 +88,7 @@ class Problem:
     observations: tuple[tuple[str, int, tuple[int, ...]], ...] = ()
     separating_data: Mapping[frozenset[str], str] = field(default_factory=dict)
     requires: Mapping[str, str] = field(default_factory=dict)
+    unit_columns: Mapping[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = [p for e in (self.base, *self.candidates) for p in e.parameters]
@@ -142,7 +146,8 @@ def with_outliers(problem: Problem) -> Problem:
 
     return Problem(problem.system, problem.base, (*problem.candidates, *effects), residuals,
                    problem.start, problem.unavailable, problem.observations,
-                   problem.separating_data, problem.requires)
+                   problem.separating_data, problem.requires,
+                   {**problem.unit_columns, **dict(where)})
 
 
 def is_outlier(name: str) -> bool:

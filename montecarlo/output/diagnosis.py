@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -133,9 +133,10 @@ def plot_gap(d: Diagnosis, view: SystemView, mc: Mapping[str, FloatArray] | None
 
 def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
                  report: Mapping[str, Any], mc: Mapping[str, FloatArray] | None = None,
-                 trials: int = 0, seed: int = 0) -> list[Path]:
+                 trials: int = 0, seed: int = 0, sections: Sequence[str] = ()) -> list[Path]:
     """Write ``diagnosis.json``, ``report.md``, ``residuals.csv`` (what the residual plot
-    shows), ``residuals.png`` and ``gap.png``.
+    shows), ``residuals.png`` and ``gap.png``; ``sections``: Markdown lines report.md adds
+    before the figures.
 
     ``mc`` holds the Monte Carlo chi2_red of the models before and after (``trials`` data sets
     each from ``seed``), or None. Every file is written under a temporary name and renamed.
@@ -168,7 +169,7 @@ def write_report(outdir: str | Path, d: Diagnosis, view: SystemView,
                         f"{m['chi2_red_mean']:.3f} | {m['chi2_red_p99']:.3f} | "
                         f"{m['fraction_at_least_measured']:.3f} |")
         text.append("")
-    text += ["![residuals](residuals.png)", "", "![gap](gap.png)", ""]
+    text += [*sections, "![residuals](residuals.png)", "", "![gap](gap.png)", ""]
     atomic_write_bytes(outdir / "report.md", "\n".join(text).encode())
     return [*written, outdir / "diagnosis.json", outdir / "residuals.csv", outdir / "report.md"]
 
