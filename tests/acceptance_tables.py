@@ -16,7 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 RECORDS = ROOT / "results" / "acceptance"
 LINK = "../../results/acceptance"
-SHARE_WORDS = ("within", "coverage", "named", "flagged", "clean", "misfit", "wrongly")
+SHARE_WORDS = ("within", "coverage", "named", "flagged", "clean", "misfit", "wrongly", "clustered")
 
 
 def suites() -> list[str]:
