@@ -981,3 +981,22 @@ def test_a_named_effect_undetectable_beside_the_rest_is_a_group_of_its_own():
     assert coef[2] ** 2 / cov[2, 2] == pytest.approx(20.25, rel=1e-9)
     assert d.after.chi2 == pytest.approx(chi2_of(y, P1, b1, P3)[0], rel=1e-9)
     assert d.confounded[0] == engine.Group("A", ("A",)) and d.groups[0] == ("A",)
+
+
+def test_least_separable_is_the_parameter_the_others_reproduce():
+    """Unit columns a, b and c = (a + b) / sqrt(2): the smallest singular value's right vector
+    of the normalised columns is (1, 1, -sqrt(2)) / 2, so c is held; a column 10 times longer
+    changes nothing (the columns are normalised); fewer than two parameters hold none."""
+    from montecarlo.discrepancy.candidate_tests import CandidateTest
+    from montecarlo.discrepancy.confounding import least_separable
+
+    rng = np.random.default_rng(0)
+    a, b = np.linalg.qr(rng.standard_normal((50, 2)))[0].T
+    c = (a + b) / math.sqrt(2.0)
+    test = CandidateTest("e", "testable", ("x", "y", "z"),
+                         projected=np.column_stack([a, 10.0 * b, c]))
+    assert least_separable(test) == "z"
+    test = CandidateTest("e", "testable", ("x", "y", "z"), projected=np.column_stack([c, a, b]))
+    assert least_separable(test) == "x"
+    assert least_separable(CandidateTest("e", "testable", ("x",),
+                                         projected=a[:, None])) is None

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
-from montecarlo.discrepancy.candidate_tests import ALPHA, holm, wald_test
+from montecarlo.discrepancy.candidate_tests import ALPHA, _orthonormal, holm, wald_test
 from montecarlo.discrepancy.confounding import least_separable
 from montecarlo.discrepancy.detect import Detection, detect
 from montecarlo.discrepancy.fit import FitError, fit_model
@@ -53,7 +53,10 @@ def adapt(state: DiagnosisState, detection: Detection, winner: Winner) -> None:
             if gauge is None:  # not even one parameter of it can be adapted
                 state.dropped[win.name] = math.nan
                 return
-            win = replace(win, active=tuple(p for p in win.active if p != gauge))
+            keep = [k for k, p in enumerate(win.active) if p != gauge]
+            columns = win.projected[:, keep] if win.projected is not None else None
+            win = replace(win, active=tuple(win.active[k] for k in keep), projected=columns,
+                          basis=None if columns is None else _orthonormal(columns))
     held = set(effect.parameters) - set(win.active) - state.fixed
     if held:  # absorbed where the effect is zero, but separated where it is fitted?
         try:

@@ -62,10 +62,10 @@ def effect_for_observation(observation: CandidateTest, effects: Sequence[Candida
     the observation or more and the observation's shift, fitted instead, leaves no significant
     signal at ``alpha`` in its columns: each then explains the other, and the observation,
     which has the smaller p-value and no more parameters, is flagged (a roll per pointing
-    would otherwise take one bad reading for a roll at that pointing).
-    Several effects present together
-    can concentrate their signal on the observations of largest leverage (an INS scale
-    factor and a pitch bias at the outermost mirrors), so a pair of effects also explains it
+    would otherwise take one bad reading for a roll at that pointing). Several effects
+    present together can concentrate their signal on the observations of largest leverage (an
+    INS scale factor and a pitch bias at the outermost mirrors), so a pair of effects also
+    explains it
     when, fitted together, they leave the shift insignificant at ``level`` while their own
     columns, given the shift, stay significant at ``alpha`` (the observation alone does not
     explain them). The strongest effect (smallest p-value) that explains the signal, alone
