@@ -32,11 +32,14 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from montecarlo.jit import one_layout
+
 SERIES_ANGLE_SQ = 2.5e-3
 """Below this squared step angle [rad^2] (0.05 rad) the quaternion of a rotation vector comes
 from its Taylor series (terms up to angle^8; the first omitted term is below 3e-23)."""
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def spline_at(t, y, g1, g2):  # pragma: no cover - compiled
     """Not-a-knot cubic spline of ``y(t)`` at two points inside each interval.
@@ -111,6 +114,7 @@ def _magnus_vector(hh, cc, wa, wb, T, bias, b):  # pragma: no cover - compiled
             hh * (x2 + y2) + cc * (x0 * y1 - x1 * y0))
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_eps, s_eps,
                      installation, offsets, camera_of, aim, k_x, k_z, steps, out,
@@ -285,6 +289,7 @@ def predicted_pixels(h, w1, w2, transform, bias, attitude_of, c_eta, s_eta, c_ep
                     diff[b, k, 1, i - 1] = (z - z0[b]) / st_i
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def rls_pass(rows, obs, prior_mean, prior_cov, noise_var, forgetting, walk_transition,
              walk_var):  # pragma: no cover - compiled
@@ -381,6 +386,7 @@ def rls_pass(rows, obs, prior_mean, prior_cov, noise_var, forgetting, walk_trans
     return X, Ps
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def walk_transition(J):  # pragma: no cover - compiled
     """``F_k = J_k J_{k-1}^-1`` (``F_0 = I``), the turn of the LOS walk in
@@ -414,6 +420,7 @@ def walk_transition(J):  # pragma: no cover - compiled
     return F
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def drift_rows(t, gyro, eta, eps, k_x, k_z):  # pragma: no cover - compiled
     """First-order image drift of the target per unit parameter (seed 001, eqs. (5)-(6)).

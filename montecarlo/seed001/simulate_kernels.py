@@ -26,7 +26,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from montecarlo.jit import one_layout
 
+
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def rocking_gyro(t, amplitude, frequency, phase, imu, bias):  # pragma: no cover - compiled
     """Sinusoidal rocking and the noise-free output of an IMU on the carrier.
@@ -86,6 +89,7 @@ def _zxy(cp, sp, ct, st, cg, sg):  # pragma: no cover - compiled
             sg * cp + cg * st * sp, sg * sp - cg * st * cp, cg * ct)
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def target_directions(carrier, camera, out):  # pragma: no cover - compiled
     """Direction in the camera of the target its LOS aimed at at ``t_0``.
@@ -150,6 +154,7 @@ def _turned(c, s, d, angle):  # pragma: no cover - compiled
     return np.cos(angle), np.sin(angle)
 
 
+@one_layout
 @nb.njit(cache=True, nogil=True)
 def rk4_gimbal(h, rate, noise, transform, bias, eta0, eps0, offset_eta, offset_eps
                ):  # pragma: no cover - compiled
