@@ -1,4 +1,7 @@
-"""Nightly regression check: passes on the shipped studies, fails on a regression."""
+"""Nightly regression check: passes on the shipped studies, fails on a regression.
+
+Slow (the acceptance suite ``nightly``): each test runs the whole nightly check, as a user's
+nightly job does; Table 1 itself is checked by the default tests of ``tests/test_table1.py``."""
 
 import shutil
 import subprocess
@@ -22,6 +25,7 @@ def nightly_run(tmp_path_factory):
     return proc, out
 
 
+@pytest.mark.slow
 def test_nightly_passes_and_records_history(nightly_run):
     proc, out = nightly_run
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -32,6 +36,7 @@ def test_nightly_passes_and_records_history(nightly_run):
     assert (out / "table1" / "summary.csv").exists() and (out / "trends" / "report.md").exists()
 
 
+@pytest.mark.slow
 def test_a_flipped_trend_or_a_drifted_table1_value_fails(nightly_run):
     _, out = nightly_run
     trends = pd.read_csv(out / "trends" / "summary.csv")

@@ -323,8 +323,8 @@ def test_loky_workers_do_not_outlive_a_killed_run(tmp_path):
 
 
 def test_ctrl_c_ends_with_one_line_that_says_a_rerun_resumes(tmp_path):
-    path = study_file(tmp_path, trials=5 * 10**7,
-                      extra='[[sweep]]\n"geometry.L_m" = [50.0, 70.0, 90.0]\n')
+    path = study_file(tmp_path, trials=10**7,
+                      extra='[[sweep]]\n"geometry.L_m" = [50.0, 70.0, 90.0, 110.0, 130.0]\n')
     out = tmp_path / "runs" / "out"
     # Ctrl-C as a terminal delivers it, also when the tests run as a background job (whose
     # children inherit an ignored SIGINT)

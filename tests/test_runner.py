@@ -175,7 +175,7 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
     text = textwrap.dedent(SMALL).replace("trials = 3000", "trials = 4000") \
         .replace("block_size = 500", "block_size = 4000") \
         .replace('"geometry.L_m" = [50.0, 200.0]',
-                 '"geometry.L_m" = [' + ", ".join(f"{x:.1f}" for x in range(30, 330, 10)) + "]")
+                 '"geometry.L_m" = [' + ", ".join(f"{x:.1f}" for x in range(30, 180, 10)) + "]")
     study = tmp_path / "resume.toml"
     study.write_text(text)
     args = ["run", str(study), "--n-jobs", "1", "--quiet"]
@@ -192,7 +192,7 @@ def test_kill_and_resume_gives_the_uninterrupted_result(tmp_path):
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     n_done = len(list(ck_root.glob("*/point-*.pkl")))
-    assert 5 <= n_done < 30, n_done
+    assert 5 <= n_done < 15, n_done
     assert not b.exists()  # no half-written results
     assert list(b.parent.glob(".out.tmp-*"))  # the killed run's staging directory is left
 
