@@ -67,6 +67,7 @@ def test_nightly_exits_nonzero_on_regression(tmp_path):
     assert "FAIL" in proc.stdout
 
 
+@pytest.mark.slow
 def test_history_holds_numbers_with_units_intervals_and_expectations(nightly_run):
     _, out = nightly_run
     history = pd.read_csv(out / "history.csv")
