@@ -8,12 +8,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+
+
+def orthonormal_basis(M: FloatArray) -> FloatArray:
+    """Orthonormal basis of the column space of M (SVD, numerically rank-revealing: directions
+    whose singular value is below 1e-12 of the largest are dropped)."""
+    if M.shape[1] == 0:
+        return np.zeros((M.shape[0], 0))
+    u, s, _ = np.linalg.svd(M, full_matrices=False)
+    keep = s > 1e-12 * max(s[0], 1e-300)
+    return u[:, keep]
 
 
 class ParameterSummary:
@@ -83,3 +94,9 @@ class LeastSquaresFit(ParameterSummary):
         from scipy import stats
 
         return float(stats.chi2.sf(self.chi2, self.dof)) if self.dof > 0 else math.nan
+
+    @cached_property
+    def column_basis(self) -> FloatArray:
+        """Orthonormal basis of the Jacobian's column space (:func:`orthonormal_basis`),
+        computed once per fit: every test of a step projects on it."""
+        return orthonormal_basis(self.jacobian)

@@ -20,6 +20,7 @@ from montecarlo.discrepancy.confounding import separated
 from montecarlo.discrepancy.engine import Diagnosis, diagnose
 from montecarlo.discrepancy.fit import FitError, fit_model, jacobian
 from montecarlo.discrepancy.problem import Effect, Problem, with_outliers
+from montecarlo.lsq import orthonormal_basis
 
 N = 40
 X = np.linspace(-1.0, 1.0, N)
@@ -413,7 +414,7 @@ def test_the_column_basis_has_the_same_rank_at_any_scale():
     V = np.linalg.qr(rng.standard_normal((3, 3)))[0]
     M = U @ np.diag([1.0, 1e-6, 1e-15]) @ V.T
     for scale in (1e-9, 1.0, 1e6):
-        B = candidate_tests._orthonormal(scale * M)
+        B = orthonormal_basis(scale * M)
         assert B.shape == (N, 2)
         np.testing.assert_allclose(B.T @ B, np.eye(2), atol=1e-9)
 

@@ -117,3 +117,30 @@ def test_shift_columns_are_the_identity_rows_finite_differences_give(snooping):
     assert set(names[len(base):]) <= set(observations.unit_columns)
     np.testing.assert_allclose(exact, numeric, atol=1e-8)
     assert np.count_nonzero(exact[:, len(base):]) == 4
+
+
+def test_pose_columns_differentiated_together_equal_one_at_a_time(snooping):
+    """A view's pose moves only that view's corners (checked on the one-at-a-time columns of
+    the model itself), so the same pose parameter of every view is perturbed in one model
+    evaluation: the columns are those of one parameter at a time, and the evaluations drop
+    from two per parameter to two per group."""
+    observations, fit = snooping
+    names = list(observations.base.parameters)
+    values = fit.params
+    alone = jacobian(replace(observations, local_rows={}), values, names)
+    for j, name in enumerate(names):
+        if name in observations.local_rows:
+            outside = np.ones(alone.shape[0], bool)
+            outside[observations.local_rows[name]] = False
+            assert not np.any(alone[outside, j]), name
+            assert np.any(alone[observations.local_rows[name], j]), name
+    sizes = []
+
+    def counted(v):
+        sizes.append(max((np.shape(x)[0] for x in v.values() if np.ndim(x)), default=1))
+        return observations.residuals(v)
+
+    together = jacobian(replace(observations, residuals=counted), values, names)
+    np.testing.assert_array_equal(together, alone)
+    n_views = 5
+    assert len(names) == 3 + 6 * n_views and sizes == [2 * (3 + 6)]

@@ -155,14 +155,14 @@ def diagnose_camera(args: argparse.Namespace) -> int:
         if sigma == AUTO:
             # started at the model with every candidate fitted, then the final model's
             with steps("the diagnosis, the pixel sigma estimated",
-                       fit_why(2 * data.n, 13 + 6 * len(data.views))):
+                       fit_why(2 * data.n, 13 + 6)):
                 d, used, found = diagnose_scaled(
                     lambda s: cam.camera_problem(data, s), "pixel_sigma_px", args.alpha,
                     initial=lambda p: fit_model(p, [c.name for c in cam.CANDIDATES]))
             sigma = used["pixel_sigma_px"]
             noise = report_entry(used, found)
         else:
-            with steps("the diagnosis", fit_why(2 * data.n, 4 + 6 * len(data.views))):
+            with steps("the diagnosis", fit_why(2 * data.n, 4 + 6)):
                 d = diagnose(cam.camera_problem(data, sigma), args.alpha)
     except (FitError, CalibrationError) as exc:
         raise InputError(f"{where}: {exc}") from None

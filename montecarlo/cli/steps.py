@@ -40,7 +40,8 @@ LIBRARIES = "importing scipy, pandas and the model's modules; a few seconds on a
 
 
 def fit_why(n_obs: int, n_params: int) -> str:
-    """Why a diagnosis's fits take time: the residuals and the model runs per Jacobian."""
+    """Why a diagnosis's fits take time: the residuals and the model runs per Jacobian
+    (``n_params``: the base parameters perturbed apart; a camera's views' poses count once)."""
     return (f"nonlinear fits of the base model, of every candidate and of the adapted model to "
             f"{n_obs} residuals; each Jacobian evaluates the model {2 * n_params}+ times "
             "(central differences)")

@@ -11,14 +11,14 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
-from montecarlo.discrepancy.candidate_tests import ALPHA, _orthonormal, holm, wald_test
+from montecarlo.discrepancy.candidate_tests import ALPHA, holm, wald_test
 from montecarlo.discrepancy.confounding import least_separable
 from montecarlo.discrepancy.detect import Detection, detect
 from montecarlo.discrepancy.fit import FitError, fit_model
 from montecarlo.discrepancy.identify import Winner
 from montecarlo.discrepancy.problem import Effect, Problem, is_outlier
 from montecarlo.discrepancy.state import DiagnosisState
-from montecarlo.lsq import LeastSquaresFit
+from montecarlo.lsq import LeastSquaresFit, orthonormal_basis
 
 
 def adapt(state: DiagnosisState, detection: Detection, winner: Winner) -> None:
@@ -38,7 +38,8 @@ def adapt(state: DiagnosisState, detection: Detection, winner: Winner) -> None:
     """
     win, rules = winner.test, state.rules
     effect = state.full.effect(win.name)
-    start = {**state.fit.params}
+    start = {**state.fit.params, **moved_by_shifts(state.fit, state.full.unit_columns,
+                                                    win.estimate)}
     for p, v in win.estimate.items():
         lo, hi = effect.bounds[effect.parameters.index(p)]
         start[p] = float(np.clip(v, lo, hi))
@@ -56,7 +57,7 @@ def adapt(state: DiagnosisState, detection: Detection, winner: Winner) -> None:
             keep = [k for k, p in enumerate(win.active) if p != gauge]
             columns = win.projected[:, keep] if win.projected is not None else None
             win = replace(win, active=tuple(win.active[k] for k in keep), projected=columns,
-                          basis=None if columns is None else _orthonormal(columns))
+                          basis=None if columns is None else orthonormal_basis(columns))
     held = set(effect.parameters) - set(win.active) - state.fixed
     if held:  # absorbed where the effect is zero, but separated where it is fitted?
         try:
@@ -84,6 +85,22 @@ def adapt(state: DiagnosisState, detection: Detection, winner: Winner) -> None:
             state.named.remove(name)
         state.dropped[name] = p_value
     state.steps.append(detection.step(win.name, winner.group, gone))
+
+
+def moved_by_shifts(fit: LeastSquaresFit, unit_columns: Mapping[str, int],
+                    shifts: Mapping[str, float]) -> dict[str, float]:
+    """The fitted parameters once ``shifts`` of single whitened residuals (an observation's
+    shift parameters, ``problem.unit_columns``) are fitted too, to first order: the least-squares
+    step ``A d = -G b`` (``G`` those rows of the identity, ``b`` the shifts); empty if a shift is
+    not of one residual. The adapted fit starts there: the nonlinear refit then converges in
+    fewer iterations (dozens of flagged observations are dozens of refits)."""
+    if not shifts or not set(shifts) <= set(unit_columns):
+        return {}
+    moved = np.zeros(fit.residual.size)
+    for name, b in shifts.items():
+        moved[unit_columns[name]] = -b
+    step = np.linalg.lstsq(fit.jacobian, moved, rcond=None)[0]
+    return dict(zip(fit.names, (fit.values + step).tolist(), strict=True))
 
 
 def explain_outliers(state: DiagnosisState, detection: Detection) -> None:

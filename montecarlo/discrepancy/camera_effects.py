@@ -114,8 +114,14 @@ def camera_problem(data: CameraData, pixel_sigma: float) -> Problem:
     # each corner's data row, 1-based (as every system's; the views file's line is one more)
     observations = tuple((f"{data.views[data.view[i]]}/{data.point_id[i]}", i + 1,
                           (2 * i, 2 * i + 1)) for i in range(data.n))
+    # a view's pose moves that view's corners only
+    local_rows = {}
+    for v in range(n_views):
+        corners = np.flatnonzero(data.view == v)
+        rows = np.column_stack([2 * corners, 2 * corners + 1]).reshape(-1)
+        local_rows.update({f"{q}{a}_{v + 1}": rows for q in "rt" for a in "xyz"})
     return Problem("camera", base, CANDIDATES, residuals, start, {}, observations,
-                   SEPARATING_DATA, REQUIRES)
+                   SEPARATING_DATA, REQUIRES, local_rows=local_rows)
 
 
 def view_groups(data: CameraData) -> dict[str, list[int]]:

@@ -10,10 +10,12 @@ docstring.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +29,7 @@ from montecarlo.discrepancy.estimated_sigma import (
 )
 from montecarlo.discrepancy.fit import candidate_columns
 from montecarlo.discrepancy.problem import Effect, Problem
-from montecarlo.lsq import LeastSquaresFit
+from montecarlo.lsq import LeastSquaresFit, orthonormal_basis
 
 FloatArray = NDArray[np.float64]
 
@@ -178,14 +180,15 @@ class CandidateTest:
     test: str = "chi2"
     dof2: int = 0
 
-
-def _orthonormal(M: FloatArray) -> FloatArray:
-    """Orthonormal basis of the column space of M (SVD, numerically rank-revealing)."""
-    if M.shape[1] == 0:
-        return np.zeros((M.shape[0], 0))
-    u, s, _ = np.linalg.svd(M, full_matrices=False)
-    keep = s > 1e-12 * max(s[0], 1e-300)
-    return u[:, keep]
+    def with_fields(self, **changes: Any) -> CandidateTest:
+        """A copy with ``changes`` (as :func:`dataclasses.replace`, without ``__init__``: a
+        step updates the adjusted p-value of thousands of observations' tests)."""
+        new = copy.copy(self)
+        for name, value in changes.items():
+            if name not in self.__dataclass_fields__:
+                raise TypeError(f"CandidateTest has no field {name!r}")
+            object.__setattr__(new, name, value)
+        return new
 
 
 def _absorbed_by(column: FloatArray, A: FloatArray, names: Sequence[str]) -> list[str]:
@@ -215,7 +218,7 @@ def absorption(c: Effect, G: FloatArray, Gbar: FloatArray, A: FloatArray, names:
     while len(active) > 1:
         fractions = []
         for j in active:
-            others = _orthonormal(Gbar[:, [i for i in active if i != j]])
+            others = orthonormal_basis(Gbar[:, [i for i in active if i != j]])
             rest = Gbar[:, j] - others @ (others.T @ Gbar[:, j])
             fractions.append(np.linalg.norm(rest) / norms[j])
         worst = int(np.argmin(fractions))
@@ -243,7 +246,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
     observations).
     """
     A = fit.jacobian
-    Q = _orthonormal(A)
+    Q = fit.column_basis
     r = fit.residual
     values = fit.params
     unavailable = {**problem.unavailable, **{
@@ -338,7 +341,7 @@ def candidate_statistics(c: Effect, active: list[int], G: FloatArray, Gbar: Floa
         c.name, status, names, retained, absorbed_by, stat, q, float(np.exp(log_p)), log_p,
         math.nan, dict(zip(names, est.tolist(), strict=True)),
         dict(zip(names, np.sqrt(np.diag(cov)).tolist(), strict=True)), mdb, influence,
-        lam0, reason, size, _orthonormal(Ga), Ga, test, dof2), log_p
+        lam0, reason, size, orthonormal_basis(Ga), Ga, test, dof2), log_p
 
 
 def canonical_correlation(a: CandidateTest, b: CandidateTest) -> float:

@@ -19,8 +19,8 @@ from montecarlo.discrepancy.candidate_tests import (
     ALPHA,
     CONFOUNDED,
     CandidateTest,
-    _orthonormal,
 )
+from montecarlo.lsq import orthonormal_basis
 
 FloatArray = NDArray[np.float64]
 
@@ -46,7 +46,7 @@ def _explains(U: FloatArray, winner: CandidateTest, residual: FloatArray, alpha:
     W = winner.projected - U @ (U.T @ winner.projected)
     if np.linalg.norm(W) < absorbed * np.linalg.norm(winner.projected):
         return True
-    basis = _orthonormal(W)
+    basis = orthonormal_basis(W)
     T = float(np.sum((basis.T @ rj) ** 2))
     return bool(stats.chi2.sf(T, basis.shape[1]) >= alpha)
 
@@ -82,7 +82,7 @@ def effect_for_observation(observation: CandidateTest, effects: Sequence[Candida
             if other.name == t.name:
                 continue
             pair = np.column_stack([t.projected, other.projected])
-            if _explains(_orthonormal(pair), observation, residual, level, absorbed) \
+            if _explains(orthonormal_basis(pair), observation, residual, level, absorbed) \
                     and not _explains(observation.basis, _columns(pair), residual, alpha,
                                       absorbed):
                 return t
@@ -103,7 +103,7 @@ def least_separable(test: CandidateTest) -> str | None:
 
 def _columns(projected: FloatArray) -> CandidateTest:
     """A nameless candidate of the given projected columns (for :func:`_explains`)."""
-    return CandidateTest("", "testable", basis=_orthonormal(projected), projected=projected)
+    return CandidateTest("", "testable", basis=orthonormal_basis(projected), projected=projected)
 
 
 def contained(inner: CandidateTest, outer: CandidateTest, level: float = CONFOUNDED) -> bool:
@@ -139,7 +139,7 @@ def minimal_member(winner: CandidateTest, eligible: Sequence[CandidateTest],
                                       or inner.dof + extra.dof >= winner.dof):
                 continue
             columns = [inner.projected] + ([] if extra is None else [extra.projected])
-            if _explains(_orthonormal(np.column_stack(columns)), winner, residual, alpha,
+            if _explains(orthonormal_basis(np.column_stack(columns)), winner, residual, alpha,
                          absorbed):
                 key = (inner.dof + (0 if extra is None else extra.dof), inner.log_p)
                 if best is None or key < best[0]:

@@ -73,8 +73,8 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
     snoop = analyse_observations(observations, fit, alpha, power, absorbed,
                                  level=lambda k: obs_share / max(k, 1),
                                  test=kind[1],
-                                 columns_below=math.inf if columns_below == math.inf else 0.0
-                                 ) if has_obs else []
+                                 columns_below=math.inf if columns_below == math.inf else 0.0,
+                                 adjust=False) if has_obs else []
     seen = [t for t in snoop if math.isfinite(t.statistic)]
     names = [t.name for t in (*members, *seen)]
     p = [t.p_value for t in (*members, *seen)]
@@ -97,9 +97,10 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
         columns = {t.name: t for t in analyse_observations(some, fit, absorbed=absorbed)}
 
     def update(ts: list[CandidateTest]) -> list[CandidateTest]:
-        return [replace(t, p_adjusted=adjusted[t.name],
-                        **({"basis": columns[t.name].basis,
-                            "projected": columns[t.name].projected} if t.name in columns else {}))
+        return [t.with_fields(p_adjusted=adjusted[t.name],
+                              **({"basis": columns[t.name].basis,
+                                  "projected": columns[t.name].projected}
+                                 if t.name in columns else {}))
                 if t.name in adjusted else t for t in ts]
 
     return update(tests), update(snoop), global_p

@@ -40,31 +40,61 @@ def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]
     All perturbed parameter vectors go through ``problem.residuals`` in one vectorised call;
     parameters in ``values`` but not in ``names`` are held at their values. The steps are the
     effects' ``steps`` times ``step_scale``. A parameter of ``problem.unit_columns`` gets its
-    exact column (a row of the identity) instead.
+    exact column (a row of the identity) instead. Parameters of ``problem.local_rows`` whose
+    rows do not overlap are perturbed together (:func:`perturbation_groups`): each one's
+    column is read on its own rows, where the others change nothing.
     """
     effect_of = problem.parameter_effect
     unit = problem.unit_columns
     varied = [j for j, n in enumerate(names) if n not in unit]
     steps = step_scale * np.array([effect_of[names[j]].steps[
         effect_of[names[j]].parameters.index(names[j])] for j in varied])
-    k = len(varied)
+    groups = perturbation_groups([names[j] for j in varied], problem.local_rows)
+    k = len(groups)
     batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
-    for i, j in enumerate(varied):
-        column = batch.setdefault(names[j], np.zeros((2 * k, 1)))
-        column[i, 0] += steps[i]
-        column[k + i, 0] -= steps[i]
+    for g, members in enumerate(groups):
+        for i in members:
+            column = batch.setdefault(names[varied[i]], np.zeros((2 * k, 1)))
+            column[g, 0] += steps[i]
+            column[k + g, 0] -= steps[i]
     if k:
         r = problem.residuals(batch)
         n_obs = r.shape[-1]
     else:
         n_obs = problem.residuals(dict(values)).size
     J = np.zeros((n_obs, len(names)))
-    if k:
-        J[:, varied] = -((r[:k] - r[k:]) / (2.0 * steps[:, None])).T
+    for g, members in enumerate(groups):
+        for i in members:
+            rows = problem.local_rows.get(names[varied[i]], slice(None))
+            J[rows, varied[i]] = -(r[g, rows] - r[k + g, rows]) / (2.0 * steps[i])
     for j, n in enumerate(names):
         if n in unit:
             J[unit[n], j] = 1.0
     return J
+
+
+def perturbation_groups(names: Sequence[str], local_rows: Mapping[str, NDArray[np.int64]]
+                        ) -> list[list[int]]:
+    """Indices of ``names`` in groups that can be perturbed in one model evaluation: each
+    parameter not in ``local_rows`` alone, the others first-fit into groups of disjoint rows
+    (a camera's views: the same pose parameter of every view in one group)."""
+    groups: list[list[int]] = []
+    taken: list[set[int]] = []
+    for i, name in enumerate(names):
+        if name not in local_rows:
+            groups.append([i])
+            taken.append(set())
+            continue
+        rows = set(np.asarray(local_rows[name]).tolist())
+        for members, used in zip(groups, taken, strict=True):
+            if used and used.isdisjoint(rows):
+                members.append(i)
+                used |= rows
+                break
+        else:
+            groups.append([i])
+            taken.append(rows)
+    return groups
 
 
 ROUNDOFF = 0.5
@@ -131,7 +161,7 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
                                  xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
     if not np.all(np.isfinite(sol.fun)):
         raise FitError("the model gives no finite prediction for these data")
-    A = jacobian(problem, dict(zip(names, sol.x, strict=True)), names)
+    A = -sol.jac  # jac's value at sol.x: trf and lm evaluate it after each accepted step
     norms = np.linalg.norm(A, axis=0)
     s = np.linalg.svd(A / np.where(norms > 0, norms, 1.0), compute_uv=False)
     # the normal matrix A'A has the square of this condition: beyond 1/sqrt(eps) its inverse

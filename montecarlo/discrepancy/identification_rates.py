@@ -53,14 +53,13 @@ from montecarlo.discrepancy.candidate_tests import (
     CONFOUNDED,
     POWER,
     CandidateTest,
-    _orthonormal,
     log_chi2_sf_asymptotic,
 )
 from montecarlo.discrepancy.confounding import contained
 from montecarlo.discrepancy.detect import detection_family
 from montecarlo.discrepancy.fit import jacobian
 from montecarlo.discrepancy.problem import Problem, with_outliers
-from montecarlo.lsq import LeastSquaresFit
+from montecarlo.lsq import LeastSquaresFit, orthonormal_basis
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -177,13 +176,13 @@ def _stand_ins(members: Sequence[CandidateTest], others: Sequence[CandidateTest]
                     continue
                 columns = [c.projected for c in (inner, extra)
                            if c is not None and c.projected is not None]
-                U = _orthonormal(np.column_stack(columns))
+                U = orthonormal_basis(np.column_stack(columns))
                 W = winner.projected - U @ (U.T @ winner.projected)
                 added = inner.dof + (0 if extra is None else extra.dof)
                 if np.linalg.norm(W) < absorbed * np.linalg.norm(winner.projected):
                     extras.append((added, -1))
                     break  # explains in every set: later extras are never reached
-                forms.append(_orthonormal(W))
+                forms.append(orthonormal_basis(W))
                 extras.append((added, len(forms) - 1))
             out.append(StandIn(w, i, tuple(extras)))
     return out, forms

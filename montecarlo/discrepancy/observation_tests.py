@@ -34,7 +34,6 @@ from montecarlo.discrepancy.candidate_tests import (
     ALPHA,
     POWER,
     CandidateTest,
-    _orthonormal,
     absorption,
     candidate_statistics,
     family_levels,
@@ -52,15 +51,18 @@ FloatArray = NDArray[np.float64]
 def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = ALPHA,
                          power: float = POWER, absorbed: float = ABSORBED,
                          level: Callable[[int], float] | None = None, test: str = "chi2",
-                         columns_below: float = math.inf) -> list[CandidateTest]:
+                         columns_below: float = math.inf, adjust: bool = True
+                         ) -> list[CandidateTest]:
     """:func:`~montecarlo.discrepancy.candidate_tests.analyse_candidates` of a problem whose
     candidates are all observations' shifts (:func:`~montecarlo.discrepancy.problem.
     with_outliers`), batched (module docstring). ``test`` is "chi2" or "tau" (or "F"). The
     ``basis`` and ``projected`` columns are given for tests whose p-value is below
-    ``columns_below`` (all by default), None for the others."""
+    ``columns_below`` (all by default), None for the others. ``p_adjusted`` is Holm's over
+    these observations, or NaN without ``adjust`` (a caller that adjusts over a larger family:
+    thousands of tests are not built twice)."""
     rows_of = {f"{OUTLIER}{oid}": rows for oid, _, rows in problem.observations}
     A, r = fit.jacobian, fit.residual
-    Q = _orthonormal(A)
+    Q = fit.column_basis
     unavailable = {**problem.unavailable, **{
         c: f"needs {need} in the model first" for c, need in problem.requires.items()
         if need not in fit.effects and c not in problem.unavailable}}
@@ -118,7 +120,7 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
                        test, columns_below)
         for k, t, lp in zip(members, *batch, strict=True):
             tests[pending[k].name], log_p[k] = t, lp
-    if work:
+    if work and adjust:
         adjusted = holm(np.exp([log_p[k] for k in work]))
         for k, p in zip(work, adjusted, strict=True):
             t = tests[pending[k].name]

@@ -77,6 +77,10 @@ class Problem:
     unit_columns : parameter -> the one whitened residual it shifts, ``r - b`` (an
         observation's shift, :func:`with_outliers`): its Jacobian column is that row of the
         identity, exactly, and is not differentiated numerically.
+    local_rows : parameter -> the only whitened residuals it changes (a camera view's pose:
+        that view's corners); parameters of disjoint rows are differentiated in one model
+        evaluation (:func:`~montecarlo.discrepancy.fit.jacobian`). Parameters not listed may
+        change every residual.
     """
 
     system: str
@@ -89,6 +93,7 @@ class Problem:
     separating_data: Mapping[frozenset[str], str] = field(default_factory=dict)
     requires: Mapping[str, str] = field(default_factory=dict)
     unit_columns: Mapping[str, int] = field(default_factory=dict)
+    local_rows: Mapping[str, NDArray[np.int64]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = [p for e in (self.base, *self.candidates) for p in e.parameters]
@@ -147,7 +152,7 @@ def with_outliers(problem: Problem) -> Problem:
     return Problem(problem.system, problem.base, (*problem.candidates, *effects), residuals,
                    problem.start, problem.unavailable, problem.observations,
                    problem.separating_data, problem.requires,
-                   {**problem.unit_columns, **dict(where)})
+                   {**problem.unit_columns, **dict(where)}, problem.local_rows)
 
 
 def is_outlier(name: str) -> bool:
