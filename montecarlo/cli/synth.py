@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -26,6 +27,16 @@ from montecarlo.units import ARCSEC
 
 def _unit(unit: str) -> str:
     return "" if unit == "1" else f" {unit}"
+
+
+def _injected(truth: dict[str, float], display_unit: Callable[[str], tuple[str, float]],
+              mounting: tuple[str, ...]) -> str:
+    """The injected effects' parameters in display units (the mounting left out), or
+    "nothing"."""
+    shown = {k: v / display_unit(k)[1] for k, v in truth.items()
+             if k not in mounting and v != 0.0}
+    return ", ".join(f"{k} = {v:.4g}{_unit(display_unit(k)[0])}"
+                     for k, v in shown.items()) or "nothing"
 
 
 def _check_files(args: argparse.Namespace) -> None:
@@ -69,12 +80,9 @@ def _cmd_synth_ground(args: argparse.Namespace) -> int:
             "ground", args.seed, truth, ge.display_unit, pixel_sigma=args.pixel_sigma_px,
             survey_sigma_m=args.survey_sigma_m, refraction_k=args.refraction_k,
             dropped_targets=dropped))
-    shown = {k: v / ge.display_unit(k)[1] for k, v in truth.items()
-             if k not in ("psi", "theta", "gamma") and v != 0.0}
     print(f"wrote {args.out}: {data.n} observations ({dropped} off the detector dropped), "
           f"seed {args.seed}; injected: "
-          + (", ".join(f"{k} = {v:.4g}{_unit(ge.display_unit(k)[0])}" for k, v in shown.items())
-             or "nothing"))
+          + _injected(truth, ge.display_unit, ("psi", "theta", "gamma")))
     return 0
 
 
@@ -121,12 +129,9 @@ def _cmd_synth_collimation(args: argparse.Namespace) -> int:
     if args.truth:
         write_text(args.truth, synth.truth_report(
             "collimation", args.seed, truth, ce.display_unit, angle_sigma_arcsec=sigma))
-    shown = {k: v / ce.display_unit(k)[1] for k, v in truth.items()
-             if k != "frame_heading" and v != 0.0}
     print(f"wrote {args.out}: {len(data.mirror)} mirrors, seed {args.seed}; diagnose with "
           f"--angle-sigma-arcsec {sigma:.4g}; injected: "
-          + (", ".join(f"{k} = {v:.4g}{_unit(ce.display_unit(k)[0])}" for k, v in shown.items())
-             or "nothing"))
+          + _injected(truth, ce.display_unit, ("frame_heading",)))
     return 0
 
 
@@ -170,14 +175,11 @@ def _synth_procedure(args: argparse.Namespace) -> int:
         write_text(args.truth, synth.truth_report(
             "collimation", args.seed, truth, pe.display_unit, angle_sigma_arcsec=sigma,
             readings="reference", reference_rows=rows, roll_mirror=args.roll_mirror or "right"))
-    shown = {k: v / pe.display_unit(k)[1] for k, v in truth.items()
-             if k != "frame_heading" and v != 0.0}
     print(f"wrote {args.out}: {len(data.mirror)} rows ("
           + ("absolute readings with the two reference rows" if rows
              else "readings relative to the reference") + f"), seed {args.seed}; diagnose with "
           f"--angle-sigma-arcsec {sigma:.4g}; injected: "
-          + (", ".join(f"{k} = {v:.4g}{_unit(pe.display_unit(k)[0])}" for k, v in shown.items())
-             or "nothing"))
+          + _injected(truth, pe.display_unit, ("frame_heading",)))
     return 0
 
 
