@@ -9,14 +9,15 @@ is larger than stated (a correlated misfit, not a lens term).
   generators: :mod:`tests.independent.ground_second` (its own defaults, 0.5 px and 3 cm),
   :mod:`tests.independent.collimation_second` (relative readings, right side, clockwise) and
   :mod:`tests.independent.camera_blind`.
-  Stabilization (seed 001, first time one diagnosis): recordings of 20 s at 50 Hz (1,001
+  Stabilization (seed 001): recordings of 20 s at 50 Hz (1,001
   samples, the length of the suites' other stabilization diagnoses) from
   :func:`montecarlo.seed001.simulate.simulate` (mount, gyro sampling and a 0 or 300 px target
   in turn, each analysed with its own mount and sampling) and from
   :mod:`tests.independent.stabilization_second` (its own scenario, installation angles within
   ±0.6°, diagnosed through ``montecarlo diagnose stabilization``; a named convention counts
-  as named). The length is chosen for time (about a second a diagnosis): the null rate is a
-  property of the tests at their alpha, whatever the number of samples.
+  as named). The length is chosen for time (a second or two a diagnosis, 1,000 of each in
+  about 16 minutes on 2 shared cores): the null rate is a property of the tests at their
+  alpha, whatever the number of samples.
 - **Hidden k2** in sets of 16 x 16 corners in 5 views (2,560 coordinates, the size of Zhang's),
   k1 = -0.2 and k2 at 1.5 times the MDB of its own test given k1: k2 named in at least 80 %.
 - **A view's noise twice the stated sigma**: the residuals cluster by view and no lens term is
@@ -24,7 +25,7 @@ is larger than stated (a correlated misfit, not a lens term).
 - **A view's corners all 1 px off**: what the diagnosis reports is recorded; a view's pose
   takes up such an offset (a small rotation of the view shifts all its corners alike).
 
-Slow: about an hour and a half of CPU.
+Slow: about two hours of CPU.
 """
 
 from __future__ import annotations
