@@ -19,7 +19,8 @@ of our simulator each (their own image and gyro noise) with the candidate's sign
 the image (its prediction with the candidate minus without, the model the diagnosis tests, as
 the ground and collimation data are generated): the same claim.
 
-Slow: about 40 minutes on 2 shared cores (stabilization 20, ground and collimation the rest).
+Slow: about half an hour on 2 shared cores (stabilization 20 minutes, ground and collimation
+5 each).
 """
 
 from __future__ import annotations
