@@ -32,7 +32,8 @@ SUITES ?= collimation_acceptance reported_sigma superquantile stabilization_esti
 	ground_independent blind_camera_acceptance diagnose_camera procedure_effects \
 	stabilization_independent diagnose_stabilization nightly sizing stabilization_variants \
 	collimation_procedure_acceptance collimation_independent discrepancy_acceptance \
-	collimation_conventions noise_auto opencv_samples large_data_acceptance
+	collimation_conventions noise_auto opencv_samples right_name_acceptance \
+	large_data_acceptance
 ACCEPTANCE_DIR ?= results/acceptance
 
 acceptance: install

@@ -61,16 +61,17 @@ def testable_effects(system: str, model: tuple[str, ...] = ()) -> list[str]:
     return [t.name for t in analyse_candidates(problem, fit) if t.status == "testable"]
 
 
-def scenarios(system: str) -> list[dict[str, Any]]:
-    """Scenarios: label, effects expected to be named, and run_trials parameters (SI)."""
+def scenarios(system: str, multiple: float = MULTIPLE) -> list[dict[str, Any]]:
+    """Scenarios: label, effects expected to be named, and run_trials parameters (SI); the
+    effects injected at ``multiple`` times their MDB."""
     out = [{"label": "null", "named": 0, "expected": "", "inject_mdb": 0.0}]
-    out += [{"label": e, "named": 1, "expected": e, "inject_mdb": MULTIPLE}
+    out += [{"label": e, "named": 1, "expected": e, "inject_mdb": multiple}
             for e in testable_effects(system)]
     if system == "collimation":
         paper = {"axis_az": PAPER_AXIS, "axis_el": PAPER_AXIS}
         out.append({"label": "paper", "named": 1, "expected": "axis_misalignment",
                     "inject_mdb": 0.0, **paper})
-        out += [{"label": f"paper+{e}", "named": 2, "expected": e, "inject_mdb": MULTIPLE,
+        out += [{"label": f"paper+{e}", "named": 2, "expected": e, "inject_mdb": multiple,
                  **paper} for e in testable_effects(system, ("axis_misalignment",))]
     return out
 
