@@ -33,7 +33,8 @@ SUITES ?= collimation_acceptance reported_sigma superquantile stabilization_esti
 	stabilization_independent diagnose_stabilization nightly sizing stabilization_variants \
 	collimation_procedure_acceptance collimation_independent discrepancy_acceptance \
 	collimation_conventions noise_auto opencv_samples right_name_acceptance \
-	large_data_acceptance
+	large_data_acceptance \
+	stabilization_null_acceptance
 ACCEPTANCE_DIR ?= results/acceptance
 
 acceptance: install
