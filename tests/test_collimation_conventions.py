@@ -391,9 +391,8 @@ def test_unequal_ins_errors_and_one_angle_sigma(tmp_path):
     cannot be given to ``diagnose collimation``, which takes one sigma for every heading and
     pitch residual. On three of its files with reference rows and the roll recorded (no effect
     hidden that the package does not model): at the pitch's sigma, hypot(2, 3)″, something is
-    detected in at least two and a mirror flagged or an effect named in at least one (measured:
-    2 and 1 with the candidates' own tests in the detection family; 3 and 2 with the global test
-    as the gate); at the heading's, hypot(2, 8)″, nothing is detected (chi-square 7-16 for 18
+    detected in at least two and a mirror flagged or an effect named in at least one (2 and 1
+    measured with the current diagnosis, 3 and 2 with an earlier one); at the heading's, hypot(2, 8)″, nothing is detected (chi-square 7-16 for 18
     degrees of freedom, a test that has lost power). Neither is right; the user has no sigma
     that is."""
     counts = {}
