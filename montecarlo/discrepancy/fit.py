@@ -49,7 +49,7 @@ def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]
     varied = [j for j, n in enumerate(names) if n not in unit]
     steps = step_scale * np.array([effect_of[names[j]].steps[
         effect_of[names[j]].parameters.index(names[j])] for j in varied])
-    groups = perturbation_groups([names[j] for j in varied], problem.local_rows)
+    groups = perturbation_groups([names[j] for j in varied], problem.local_row_sets)
     k = len(groups)
     batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
     for g, members in enumerate(groups):
@@ -73,7 +73,7 @@ def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]
     return J
 
 
-def perturbation_groups(names: Sequence[str], local_rows: Mapping[str, NDArray[np.int64]]
+def perturbation_groups(names: Sequence[str], local_rows: Mapping[str, frozenset[int]]
                         ) -> list[list[int]]:
     """Indices of ``names`` in groups that can be perturbed in one model evaluation: each
     parameter not in ``local_rows`` alone, the others first-fit into groups of disjoint rows
@@ -81,11 +81,11 @@ def perturbation_groups(names: Sequence[str], local_rows: Mapping[str, NDArray[n
     groups: list[list[int]] = []
     taken: list[set[int]] = []
     for i, name in enumerate(names):
-        if name not in local_rows:
+        rows = local_rows.get(name)
+        if not rows:
             groups.append([i])
             taken.append(set())
             continue
-        rows = set(np.asarray(local_rows[name]).tolist())
         for members, used in zip(groups, taken, strict=True):
             if used and used.isdisjoint(rows):
                 members.append(i)
@@ -93,7 +93,7 @@ def perturbation_groups(names: Sequence[str], local_rows: Mapping[str, NDArray[n
                 break
         else:
             groups.append([i])
-            taken.append(rows)
+            taken.append(set(rows))
     return groups
 
 

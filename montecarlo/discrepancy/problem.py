@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,6 +110,11 @@ class Problem:
                 return e
         raise KeyError(f"unknown effect {name!r}; known: "
                        f"{', '.join(e.name for e in self.candidates)}")
+
+    @cached_property
+    def local_row_sets(self) -> dict[str, frozenset[int]]:
+        """``local_rows`` as sets, formed once per problem (every Jacobian groups by them)."""
+        return {n: frozenset(np.asarray(r).tolist()) for n, r in self.local_rows.items()}
 
     @property
     def parameter_effect(self) -> dict[str, Effect]:
