@@ -392,9 +392,9 @@ def test_unequal_ins_errors_and_one_angle_sigma(tmp_path):
     pitch residual. On three of its files with reference rows and the roll recorded (no effect
     hidden that the package does not model): at the pitch's sigma, hypot(2, 3)″, something is
     detected in at least two and a mirror flagged or an effect named in at least one (2 and 1
-    measured with the current diagnosis, 3 and 2 with an earlier one); at the heading's, hypot(2, 8)″, nothing is detected (chi-square 7-16 for 18
-    degrees of freedom, a test that has lost power). Neither is right; the user has no sigma
-    that is."""
+    measured with the current diagnosis, 3 and 2 with an earlier one); at the heading's,
+    hypot(2, 8)″, nothing is detected (chi-square 7-16 for 18 degrees of freedom, a test that
+    has lost power). Neither is right; the user has no sigma that is."""
     counts = {}
     for sigma in (math.hypot(2.0, 3.0), math.hypot(2.0, 8.0)):
         detected = flagged = 0
