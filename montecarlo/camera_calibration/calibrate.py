@@ -61,7 +61,7 @@ def homography(model: ArrayLike, image: ArrayLike) -> FloatArray:
     rows = np.concatenate([
         np.column_stack([Mh, zero, -mh[:, :1] * Mh]),
         np.column_stack([zero, Mh, -mh[:, 1:2] * Mh])])
-    _, s, vt = np.linalg.svd(rows)
+    _, s, vt = np.linalg.svd(rows, full_matrices=False)
     if s[-2] < 1e-12 * s[0]:
         raise CalibrationError("the points of a view do not fix a homography (collinear?)")
     H = np.linalg.inv(Tm) @ vt[-1].reshape(3, 3) @ TM

@@ -99,7 +99,7 @@ def moved_by_shifts(fit: LeastSquaresFit, unit_columns: Mapping[str, int],
     moved = np.zeros(fit.residual.size)
     for name, b in shifts.items():
         moved[unit_columns[name]] = -b
-    step = np.linalg.lstsq(fit.jacobian, moved, rcond=None)[0]
+    step = fit.covariance @ (fit.jacobian.T @ moved)
     return dict(zip(fit.names, (fit.values + step).tolist(), strict=True))
 
 

@@ -10,9 +10,8 @@ docstring.
 
 from __future__ import annotations
 
-import copy
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -125,6 +124,29 @@ def log_chi2_sf_asymptotic(x: float, dof: int) -> float:
     return (a - 1.0) * math.log(y) - y + math.log(series) - math.lgamma(a)
 
 
+class RowOfValues(Mapping[str, float]):
+    """Parameter -> value, read from one row of an array shared by many tests: a step tests
+    thousands of observations, each with an influence on every model parameter, and builds no
+    dictionary for them."""
+
+    __slots__ = ("_index", "_row")
+
+    def __init__(self, index: Mapping[str, int], row: FloatArray) -> None:
+        self._index, self._row = index, row
+
+    def __getitem__(self, name: str) -> float:
+        return float(self._row[self._index[name]])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._index)
+
+    def __len__(self) -> int:
+        return len(self._index)
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
+
+
 @dataclass(frozen=True)
 class CandidateTest:
     """Identification statistics of one candidate against the current model.
@@ -171,7 +193,7 @@ class CandidateTest:
     estimate: dict[str, float] = field(default_factory=dict)
     stderr: dict[str, float] = field(default_factory=dict)
     mdb: dict[str, float] = field(default_factory=dict)
-    influence: dict[str, float] = field(default_factory=dict)
+    influence: Mapping[str, float] = field(default_factory=dict)
     lambda0: float = math.nan
     reason: str = ""
     level: float = math.nan
@@ -180,14 +202,22 @@ class CandidateTest:
     test: str = "chi2"
     dof2: int = 0
 
+    @classmethod
+    def of(cls, *values: Any) -> CandidateTest:
+        """``CandidateTest(*values)`` with every field given, without ``__init__`` (a step
+        builds the tests of thousands of observations)."""
+        new = object.__new__(cls)
+        new.__dict__.update(zip(cls.__dataclass_fields__, values, strict=True))
+        return new
+
     def with_fields(self, **changes: Any) -> CandidateTest:
         """A copy with ``changes`` (as :func:`dataclasses.replace`, without ``__init__``: a
         step updates the adjusted p-value of thousands of observations' tests)."""
-        new = copy.copy(self)
-        for name, value in changes.items():
-            if name not in self.__dataclass_fields__:
-                raise TypeError(f"CandidateTest has no field {name!r}")
-            object.__setattr__(new, name, value)
+        unknown = set(changes) - set(self.__dataclass_fields__)
+        if unknown:
+            raise TypeError(f"CandidateTest has no field {sorted(unknown)[0]!r}")
+        new = object.__new__(CandidateTest)
+        new.__dict__.update(self.__dict__, **changes)
         return new
 
 

@@ -127,7 +127,11 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
     """Fit the base model plus ``effects`` (names of candidates) by nonlinear least squares.
 
     Candidate parameters are bounded by their physical bounds (``method="trf"``); unspecified
-    starting values are the problem's base start and zero for candidates.
+    starting values are the problem's base start and zero for candidates. An unbounded
+    parameter of ``problem.unit_columns`` (a flagged observation's shift ``b`` of one whitened
+    residual) is not iterated on: its residual ``r_i - b`` is zero at ``b = r_i``, so the other
+    parameters are those of the fit without row ``i`` (:func:`_solve`), and ``b`` is ``r_i``
+    there. The result is the fit of every parameter, with its full Jacobian and covariance.
 
     Raises
     ------
@@ -148,20 +152,19 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
     if n_obs < len(names) + 1:
         raise FitError(f"{n_obs} observations cannot fit {len(names)} parameters with a "
                        "degree of freedom left")
-
-    def fun(x: FloatArray) -> FloatArray:
-        return problem.residuals(dict(zip(names, x, strict=True)))
-
-    def jac(x: FloatArray) -> FloatArray:
-        return -jacobian(problem, dict(zip(names, x, strict=True)), names)
-
-    bounded = bool(np.isfinite(lower).any() or np.isfinite(upper).any())
-    sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lower, upper),
-                                 method="trf" if bounded else "lm", x_scale="jac",
-                                 xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
-    if not np.all(np.isfinite(sol.fun)):
-        raise FitError("the model gives no finite prediction for these data")
-    A = -sol.jac  # jac's value at sol.x: trf and lm evaluate it after each accepted step
+    shift = [j for j, n in enumerate(names) if n in problem.unit_columns
+             and np.isinf(lower[j]) and np.isinf(upper[j])]
+    iterated = [j for j in range(len(names)) if j not in set(shift)]
+    out_rows = [problem.unit_columns[names[j]] for j in shift]
+    theta, J, r = _solve(problem, [names[j] for j in iterated], x0[iterated], lower[iterated],
+                         upper[iterated], out_rows)
+    values = np.empty(len(names))
+    values[iterated] = theta
+    values[shift] = r[out_rows]
+    r[out_rows] = 0.0
+    A = np.zeros((n_obs, len(names)))
+    A[:, iterated] = J
+    A[out_rows, shift] = 1.0
     norms = np.linalg.norm(A, axis=0)
     s = np.linalg.svd(A / np.where(norms > 0, norms, 1.0), compute_uv=False)
     # the normal matrix A'A has the square of this condition: beyond 1/sqrt(eps) its inverse
@@ -173,4 +176,36 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
     except np.linalg.LinAlgError:  # condition of A'A, the square of A's, beyond double precision
         raise FitError(f"parameters of {', '.join(model)} are not separable with these "
                        "data") from None
-    return LeastSquaresFit(names, sol.x, cov, fun(sol.x), A, effects=model)
+    return LeastSquaresFit(names, values, cov, r, A, effects=model)
+
+
+def _solve(problem: Problem, names: list[str], x0: FloatArray, lower: FloatArray,
+           upper: FloatArray, out_rows: list[int]
+           ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``scipy.optimize.least_squares`` of parameters ``names`` on the whitened residuals
+    without rows ``out_rows``. Returns the solution, :func:`jacobian` there (every row) and
+    the residuals there (every row)."""
+    keep: slice | NDArray[np.bool_] = slice(None)
+    if out_rows:
+        keep = np.ones(problem.residuals(dict(zip(names, x0, strict=True))).size, bool)
+        keep[out_rows] = False
+    last: dict[str, FloatArray] = {}
+
+    def fun(x: FloatArray) -> FloatArray:
+        return problem.residuals(dict(zip(names, x, strict=True)))[keep]
+
+    def jac(x: FloatArray) -> FloatArray:
+        last["x"], last["J"] = x.copy(), jacobian(problem, dict(zip(names, x, strict=True)),
+                                                  names)
+        return -last["J"][keep]
+
+    bounded = bool(np.isfinite(lower).any() or np.isfinite(upper).any())
+    sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lower, upper),
+                                 method="trf" if bounded else "lm", x_scale="jac",
+                                 xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
+    r = np.array(problem.residuals(dict(zip(names, sol.x, strict=True))), dtype=float)
+    if not np.all(np.isfinite(r[keep])):
+        raise FitError("the model gives no finite prediction for these data")
+    if not np.array_equal(last.get("x"), sol.x):  # trf and lm evaluate it after each step
+        jac(sol.x)
+    return sol.x, last["J"], r

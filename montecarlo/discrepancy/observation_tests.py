@@ -34,6 +34,7 @@ from montecarlo.discrepancy.candidate_tests import (
     ALPHA,
     POWER,
     CandidateTest,
+    RowOfValues,
     absorption,
     candidate_statistics,
     family_levels,
@@ -66,11 +67,12 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
     unavailable = {**problem.unavailable, **{
         c: f"needs {need} in the model first" for c, need in problem.requires.items()
         if need not in fit.effects and c not in problem.unavailable}}
+    in_model = set(fit.effects)
     pending = [c for c in problem.candidates
-               if c.name not in fit.effects and c.name not in unavailable]
+               if c.name not in in_model and c.name not in unavailable]
     tests: dict[str, CandidateTest] = {}
     for c in problem.candidates:
-        if c.name in fit.effects:
+        if c.name in in_model:
             tests[c.name] = CandidateTest(c.name, "in_model", reason="already in the model")
         elif c.name in unavailable:
             tests[c.name] = CandidateTest(c.name, "unavailable", reason=unavailable[c.name])
@@ -173,8 +175,9 @@ def _all_kept(Qf: FloatArray, start: NDArray[np.int64], kept: FloatArray,
         det_ok = np.linalg.cond(N) < 1.0 / np.finfo(float).eps
         rest = np.zeros((len(members), q))
         rest[det_ok] = 1.0 / np.einsum("kii->ki", np.linalg.inv(N[det_ok]))
-        for i, k in enumerate(members):
-            out[k] = bool(det_ok[i] and np.all(rest[i] >= absorbed**2))
+        ok = det_ok & np.all(rest >= absorbed**2, axis=1)
+        for k, kept_all in zip(members.tolist(), ok.tolist(), strict=True):
+            out[k] = kept_all
     return out
 
 
@@ -234,8 +237,13 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
     bound = np.array([[max(abs(lo), abs(hi)) for lo, hi in pending[k].bounds] for k in members])
     with np.errstate(invalid="ignore"):
         reach = np.sum(bound * np.sqrt(diag), axis=1) ** 2
+    index = {n: j for j, n in enumerate(fit.names)}
+    kept_q = kept[cols].reshape(len(members), q).tolist()
+    rows = zip(est.tolist(), stderr.tolist(), mdb.tolist(), influence.T,
+               stat.tolist(), np.exp(log_p).tolist(), log_p.tolist(), kept_q,
+               strict=True)
     out = []
-    for i, k in enumerate(members):
+    for i, (k, (e, se, m, infl, st, pv, lp, kq)) in enumerate(zip(members, rows, strict=True)):
         c = pending[k]
         status, reason = "testable", ""
         if reach[i] < lam0:
@@ -243,13 +251,11 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
             reason = (f"noncentrality at most {reach[i]:.3g} within its physical bounds, "
                       f"{lam0:.3g} needed")
         names = c.parameters
-        out.append(CandidateTest(
-            c.name, status, names, _retained(c, kept, start[k]), {}, float(stat[i]), q,
-            float(np.exp(log_p[i])), float(log_p[i]), math.nan,
-            dict(zip(names, est[i].tolist(), strict=True)),
-            dict(zip(names, stderr[i].tolist(), strict=True)),
-            dict(zip(names, mdb[i].tolist(), strict=True)),
-            dict(zip(fit.names, influence[:, i].tolist(), strict=True)),
+        out.append(CandidateTest.of(
+            c.name, status, names, dict(zip(names, kq, strict=True)), {}, st, q,
+            pv, lp, math.nan, dict(zip(names, e, strict=True)),
+            dict(zip(names, se, strict=True)), dict(zip(names, m, strict=True)),
+            RowOfValues(index, infl),
             lam0, reason, size, *((basis[:, slot[i] * q:(slot[i] + 1) * q].copy(),
                                    projected[:, slot[i] * q:(slot[i] + 1) * q].copy())
                                   if i in slot else (None, None)), test, dof2))

@@ -116,7 +116,7 @@ class Problem:
         """``local_rows`` as sets, formed once per problem (every Jacobian groups by them)."""
         return {n: frozenset(np.asarray(r).tolist()) for n, r in self.local_rows.items()}
 
-    @property
+    @cached_property
     def parameter_effect(self) -> dict[str, Effect]:
         return {p: e for e in (self.base, *self.candidates) for p in e.parameters}
 
@@ -142,13 +142,13 @@ def with_outliers(problem: Problem) -> Problem:
     if not problem.observations:
         return problem
     effects = tuple(outlier_effect(oid, rows) for oid, _, rows in problem.observations)
-    where = [(p, row) for e, (_, _, rows) in zip(effects, problem.observations, strict=True)
-             for p, row in zip(e.parameters, rows, strict=True)]
+    where = {p: row for e, (_, _, rows) in zip(effects, problem.observations, strict=True)
+             for p, row in zip(e.parameters, rows, strict=True)}
     base = problem.residuals
 
     def residuals(values: Mapping[str, FloatArray]) -> FloatArray:
         r = np.asarray(base(values), dtype=float)
-        shifts = [(row, np.asarray(values[p], float)) for p, row in where if p in values]
+        shifts = [(where[p], np.asarray(v, float)) for p, v in values.items() if p in where]
         batch = max((v.shape[0] for _, v in shifts if v.ndim), default=0)
         r = np.array(np.broadcast_to(r, (batch, r.shape[-1])) if batch and r.ndim == 1 else r)
         for row, v in shifts:
@@ -158,7 +158,7 @@ def with_outliers(problem: Problem) -> Problem:
     return Problem(problem.system, problem.base, (*problem.candidates, *effects), residuals,
                    problem.start, problem.unavailable, problem.observations,
                    problem.separating_data, problem.requires,
-                   {**problem.unit_columns, **dict(where)}, problem.local_rows)
+                   {**problem.unit_columns, **where}, problem.local_rows)
 
 
 def is_outlier(name: str) -> bool:
