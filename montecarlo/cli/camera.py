@@ -26,7 +26,7 @@ from montecarlo.cli.noise_options import (
     positive_or_auto,
     report_entry,
 )
-from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
+from montecarlo.cli.steps import Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir, writable_file
 
@@ -116,7 +116,7 @@ def diagnose_camera(args: argparse.Namespace) -> int:
     """``diagnose camera MODEL.csv VIEWS.csv``: the pinhole model against distortion, skew,
     aspect ratio and bad corners; the final camera, practical significance, pixel error left."""
     steps = Steps()
-    with steps("loading", LIBRARIES):
+    with steps.loading():
         from montecarlo.camera_calibration.calibrate import CalibrationError
         from montecarlo.discrepancy import camera_effects as cam
         from montecarlo.discrepancy.engine import diagnose

@@ -35,7 +35,7 @@ from montecarlo.cli.noise_options import (
 from montecarlo.cli.stabilization import (
     add_diagnose_parser as add_stabilization_diagnose_parser,
 )
-from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
+from montecarlo.cli.steps import Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.io.files import OutputDir
 from montecarlo.units import ARCSEC
@@ -163,7 +163,7 @@ def _leave_one_out(d: Diagnosis, view: SystemView, groups: tuple[str, Sequence[s
 
 def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
     steps = Steps()
-    with steps("loading", LIBRARIES):
+    with steps.loading():
         from montecarlo.discrepancy import ground_effects as ge
         from montecarlo.discrepancy.fit import FitError
         from montecarlo.geometry.camera import Camera
@@ -193,7 +193,7 @@ def _cmd_diagnose_ground(args: argparse.Namespace) -> int:
 
 def _cmd_diagnose_collimation(args: argparse.Namespace) -> int:
     steps = Steps()
-    with steps("loading", LIBRARIES):
+    with steps.loading():
         from montecarlo.discrepancy import collimation_effects as ce
         from montecarlo.discrepancy.fit import FitError
         from montecarlo.io.collimation_csv import read_mirror_csv

@@ -30,7 +30,7 @@ from montecarlo.cli.noise_options import (
     positive_or_auto,
     report_entry,
 )
-from montecarlo.cli.steps import LIBRARIES, Steps, fit_why
+from montecarlo.cli.steps import Steps, fit_why
 from montecarlo.errors import InputError
 from montecarlo.units import ARCMIN, DEG_PER_HOUR, DEG_PER_ROOT_HOUR
 
@@ -286,7 +286,7 @@ START_IMAGE_NOISE = 0.1
 
 def diagnose_stabilization(args: argparse.Namespace) -> int:
     steps = Steps()
-    with steps("loading", LIBRARIES):
+    with steps.loading():
         from montecarlo.discrepancy import stabilization_effects as ste
         from montecarlo.discrepancy.engine import diagnose
         from montecarlo.discrepancy.fit import FitError
