@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize, stats
+from scipy import special, stats
 
 from montecarlo.discrepancy.estimated_sigma import (
     f_statistic,
@@ -93,17 +93,10 @@ def family_levels(alpha: float, n_effects: int, observations: bool) -> tuple[flo
 def noncentrality(alpha: float, dof: int, power: float = POWER) -> float:
     """Noncentrality ``lambda`` at which a chi2(dof) test of size ``alpha`` has ``power``.
 
-    Solves ``P(chi2'(dof, lambda) > chi2_{1-alpha}(dof)) = power`` (Baarda's lambda0).
+    Solves ``P(chi2'(dof, lambda) > chi2_{1-alpha}(dof)) = power`` (Baarda's lambda0) with
+    ``scipy.special.chndtrinc``, the inverse of the noncentral chi2 distribution in lambda.
     """
-    crit = stats.chi2.isf(alpha, dof)
-
-    def gap(lam: float) -> float:
-        return float(stats.ncx2.sf(crit, dof, lam)) - power
-
-    hi = 1.0
-    while gap(hi) < 0:
-        hi *= 2.0
-    return float(optimize.brentq(gap, 1e-12, hi, xtol=1e-10))
+    return float(special.chndtrinc(stats.chi2.isf(alpha, dof), dof, 1.0 - power))
 
 
 def log_chi2_sf(x: float, dof: int) -> float:
