@@ -34,7 +34,7 @@ class FitError(ValueError):
 
 
 def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str],
-             step_scale: float = 1.0) -> FloatArray:
+             step_scale: float = 1.0, groups: list[list[int]] | None = None) -> FloatArray:
     """Whitened design columns ``-d residual / d parameter`` by central differences, (n, k).
 
     All perturbed parameter vectors go through ``problem.residuals`` in one vectorised call;
@@ -42,14 +42,16 @@ def jacobian(problem: Problem, values: Mapping[str, float], names: Sequence[str]
     effects' ``steps`` times ``step_scale``. A parameter of ``problem.unit_columns`` gets its
     exact column (a row of the identity) instead. Parameters of ``problem.local_rows`` whose
     rows do not overlap are perturbed together (:func:`perturbation_groups`): each one's
-    column is read on its own rows, where the others change nothing.
+    column is read on its own rows, where the others change nothing. ``groups``, if given,
+    are those groups (a fit's every Jacobian has the same).
     """
     effect_of = problem.parameter_effect
     unit = problem.unit_columns
     varied = [j for j, n in enumerate(names) if n not in unit]
     steps = step_scale * np.array([effect_of[names[j]].steps[
         effect_of[names[j]].parameters.index(names[j])] for j in varied])
-    groups = perturbation_groups([names[j] for j in varied], problem.local_row_sets)
+    if groups is None:
+        groups = perturbation_groups([names[j] for j in varied], problem.local_row_sets)
     k = len(groups)
     batch = {n: np.full((2 * k, 1), float(v)) for n, v in values.items()}
     for g, members in enumerate(groups):
@@ -190,13 +192,15 @@ def _solve(problem: Problem, names: list[str], x0: FloatArray, lower: FloatArray
         keep = np.ones(problem.residuals(dict(zip(names, x0, strict=True))).size, bool)
         keep[out_rows] = False
     last: dict[str, FloatArray] = {}
+    groups = perturbation_groups([n for n in names if n not in problem.unit_columns],
+                                 problem.local_row_sets)
 
     def fun(x: FloatArray) -> FloatArray:
         return problem.residuals(dict(zip(names, x, strict=True)))[keep]
 
     def jac(x: FloatArray) -> FloatArray:
         last["x"], last["J"] = x.copy(), jacobian(problem, dict(zip(names, x, strict=True)),
-                                                  names)
+                                                  names, groups=groups)
         return -last["J"][keep]
 
     bounded = bool(np.isfinite(lower).any() or np.isfinite(upper).any())
