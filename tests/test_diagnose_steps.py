@@ -44,3 +44,22 @@ def test_json_output_stays_parsable_with_notes(tmp_path):
     assert out.returncode == 0, out.stderr
     json.loads(out.stdout)
     assert "slow step: the diagnosis took" in out.stderr
+
+
+def test_loaded_libraries_frozen_during_the_command_only(capsys):
+    """The loading step freezes what it loaded out of the garbage collector's full
+    collections; ``main`` unfreezes when the command ends, so an in-process caller's later
+    garbage is collected as usual."""
+    import gc
+
+    from montecarlo.cli import main
+
+    frozen = []
+    with timing.Steps().loading():
+        pass
+    frozen.append(gc.get_freeze_count())
+    gc.unfreeze()
+    assert main(["diagnose", "collimation", "results/examples/discrepancy_collimation/data.csv",
+                 "--readings", "absolute", "--angle-sigma-arcsec", "2.828", "--json"]) == 0
+    frozen.append(gc.get_freeze_count())
+    assert frozen[0] > 0 and frozen[1] == 0

@@ -7,6 +7,7 @@ Every subcommand reports bad input as one line on stderr and exits with code 2.
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import os
 import sys
@@ -71,6 +72,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     finally:
         log.removeHandler(handler)
+        gc.unfreeze()  # a diagnosis froze what it loaded (Steps.loading); in-process callers go on
 
 
 def entry_point() -> None:

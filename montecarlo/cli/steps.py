@@ -26,9 +26,10 @@ class Steps:
 
     @contextmanager
     def loading(self) -> Iterator[None]:
-        """The step that imports the libraries. What it loaded lives as long as the process:
+        """The step that imports the libraries. What it loaded lives as long as the command:
         it is frozen out of the garbage collector's full collections, which would otherwise
-        walk its ~100,000 objects each time (0.65 s of a 0.15 px camera diagnosis)."""
+        walk its ~100,000 objects each time (0.65 s of a 0.15 px camera diagnosis), until the
+        command ends (:func:`montecarlo.cli.main` unfreezes)."""
         with self("loading", LIBRARIES):
             yield
         gc.freeze()
