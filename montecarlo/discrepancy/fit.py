@@ -158,8 +158,10 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
              and np.isinf(lower[j]) and np.isinf(upper[j])]
     iterated = [j for j in range(len(names)) if j not in set(shift)]
     out_rows = [problem.unit_columns[names[j]] for j in shift]
+    keep = np.ones(n_obs, bool)
+    keep[out_rows] = False
     theta, J, r = _solve(problem, [names[j] for j in iterated], x0[iterated], lower[iterated],
-                         upper[iterated], out_rows)
+                         upper[iterated], keep)
     values = np.empty(len(names))
     values[iterated] = theta
     values[shift] = r[out_rows]
@@ -182,33 +184,30 @@ def fit_model(problem: Problem, effects: Sequence[str], start: Mapping[str, floa
 
 
 def _solve(problem: Problem, names: list[str], x0: FloatArray, lower: FloatArray,
-           upper: FloatArray, out_rows: list[int]
+           upper: FloatArray, keep: NDArray[np.bool_]
            ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``scipy.optimize.least_squares`` of parameters ``names`` on the whitened residuals
-    without rows ``out_rows``. Returns the solution, :func:`jacobian` there (every row) and
-    the residuals there (every row)."""
-    keep: slice | NDArray[np.bool_] = slice(None)
-    if out_rows:
-        keep = np.ones(problem.residuals(dict(zip(names, x0, strict=True))).size, bool)
-        keep[out_rows] = False
+    ``keep`` selects. Returns the solution, :func:`jacobian` there and the residuals there
+    (every row of both)."""
+    rows: slice | NDArray[np.bool_] = slice(None) if keep.all() else keep
     last: dict[str, FloatArray] = {}
     groups = perturbation_groups([n for n in names if n not in problem.unit_columns],
                                  problem.local_row_sets)
 
     def fun(x: FloatArray) -> FloatArray:
-        return problem.residuals(dict(zip(names, x, strict=True)))[keep]
+        return problem.residuals(dict(zip(names, x, strict=True)))[rows]
 
     def jac(x: FloatArray) -> FloatArray:
         last["x"], last["J"] = x.copy(), jacobian(problem, dict(zip(names, x, strict=True)),
                                                   names, groups=groups)
-        return -last["J"][keep]
+        return -last["J"][rows]
 
     bounded = bool(np.isfinite(lower).any() or np.isfinite(upper).any())
     sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lower, upper),
                                  method="trf" if bounded else "lm", x_scale="jac",
                                  xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
     r = np.array(problem.residuals(dict(zip(names, sol.x, strict=True))), dtype=float)
-    if not np.all(np.isfinite(r[keep])):
+    if not np.all(np.isfinite(r)):
         raise FitError("the model gives no finite prediction for these data")
     if not np.array_equal(last.get("x"), sol.x):  # trf and lm evaluate it after each step
         jac(sol.x)
