@@ -229,3 +229,35 @@ def test_errors_toml_folds_the_bound_in_by_variance():
                             "distortion_source": None}, "x", 0.2, [])
     assert tomllib.loads(other)["errors"]["pixel_px"]["sigma"] == 0.5
     assert "+-0.0000 px (none tested)" in other
+
+
+def test_what_a_view_offset_leaves_against_opencvs_jacobian():
+    """A view's corners all shifted alike: the noncentrality the refitted pinhole leaves,
+    against the same projection computed from OpenCV's own Jacobian of ``projectPoints``
+    (focal length as fx + fy, principal point, each view's rotation vector and translation),
+    and the Neyman-Pearson bound of any test of it (closed form: Phi(sqrt(lam) - z))."""
+    cv2 = pytest.importorskip("cv2")
+    sigma, grid = 0.2, 16
+    points, r, t = ca.design(grid)
+    K = np.array([[DEFAULT_CAMERA["f"], 0, DEFAULT_CAMERA["cx"]],
+                  [0, DEFAULT_CAMERA["f"], DEFAULT_CAMERA["cy"]], [0, 0, 1.0]])
+    obj = np.column_stack([points, np.zeros(len(points))])
+    n, v = len(points), r.shape[0]
+    A = np.zeros((2 * n * v, 3 + 6 * v))
+    for k in range(v):
+        _, jac = cv2.projectPoints(obj, r[k], t[k], K, np.zeros(5))
+        rows = slice(2 * n * k, 2 * n * (k + 1))
+        A[rows, 0] = jac[:, 6] + jac[:, 7]
+        A[rows, 1:3] = jac[:, 8:10]
+        A[rows, 3 + 6 * k:9 + 6 * k] = jac[:, 0:6]
+    q = np.linalg.qr(A / sigma)[0]
+    for view in range(v):
+        shift = np.repeat(np.arange(n * v) // n == view, 2) / sigma
+        left = shift - q @ (q.T @ shift)
+        assert ca.offset_noncentrality(sigma, grid, view, 1.0) == pytest.approx(
+            float(left @ left), rel=1e-4)
+    lam = ca.offset_noncentrality(sigma, grid)
+    assert 3.0 < lam < 4.5  # a 1 px shift is 5 sigma a coordinate; the pose takes up 98 %
+    assert ca.most_powerful_rate(lam, 0.01) == pytest.approx(
+        0.5 * math.erfc((2.3263478740408408 - math.sqrt(lam)) / math.sqrt(2)), rel=1e-9)
+    assert ca.most_powerful_rate(0.0, 0.01) == pytest.approx(0.01)

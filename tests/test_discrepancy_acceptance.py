@@ -72,23 +72,30 @@ def test_the_focal_scale_of_the_confounded_pair_is_below_its_mdb_given_the_range
 def test_full_acceptance(system, figures):
     """300 trials a scenario. The share of the named effect's parameters within 2 sigma is bounded
     from both sides by the binomial band of 95.45 % at the number of trials it was named in (one
-    Bernoulli per trial: the mean of a trial's correlated parameters varies no more)."""
+    Bernoulli per trial: the mean of a trial's correlated parameters varies no more). Every
+    scenario's figures are recorded before the test fails on any of them."""
     table = acc.run(system, trials=300, seed=2024, n_jobs=2)
     print("\n" + acc.to_markdown(table))
     null = table[table.scenario == "null"].iloc[0]
     assert null.trials >= 300
-    figures.record(slug(system, "null", "named_any"), null.named_any, None, 0.05)
-    assert null.named_any <= 0.05
     if system == "ground":
         assert (table.named_watched == 0).all()  # refraction never named
+    figures.record(slug(system, "null", "named_any"), null.named_any, None, 0.05)
+    failed = [] if null.named_any <= 0.05 else [f"null named {null.named_any:.3f}"]
     for r in table[table.scenario != "null"].itertuples():
         name = slug(system, r.scenario)
         figures.record(f"{name}.named_or_group", r.named_or_group, 0.90)
         figures.record(f"{name}.after_in_band", r.after_in_band, 0.90)
-        assert r.named_or_group >= 0.90, r.scenario
+        failed += [f"{r.scenario} {what} {value:.3f}" for what, value in (
+            ("named or group", r.named_or_group), ("after in band", r.after_in_band))
+            if value < 0.90]
         named = round(r.named_expected * r.trials)
-        check_coverage(figures, f"{name}.within_2sigma", round(r.within_2sigma * named), named)
-        assert r.after_in_band >= 0.90, r.scenario
+        try:
+            check_coverage(figures, f"{name}.within_2sigma", round(r.within_2sigma * named),
+                           named)
+        except AssertionError as e:
+            failed.append(str(e))
+    assert not failed, failed
 
 
 def physics_case(label):

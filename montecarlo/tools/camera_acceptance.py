@@ -31,6 +31,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.stats import norm
 
 from montecarlo.camera_calibration.simulate import (
     DEFAULT_CAMERA,
@@ -116,6 +117,28 @@ def injections(sigma: float, grid: int = 8, multiple: float = 3.0) -> dict[str, 
     out["view_offset"] = (VIEW_OFFSET, 1.0)
     out["view_noise"] = (0.0, VIEW_NOISE)
     return out
+
+
+def offset_noncentrality(sigma: float = 0.2, grid: int = 16, view: int = VIEW,
+                         offset: float = VIEW_OFFSET) -> float:
+    """Noncentrality lambda [1] that every corner of ``view`` shifted by ``offset`` [px] along
+    (1, 1) leaves once the pinhole (focal length, principal point, every view's pose) is
+    refitted: ``|(I - P_A) s|^2``, ``s`` the whitened shift and ``A`` the whitened Jacobian of
+    the noise-free design. What a view's pose takes up of the shift is in the column space
+    of ``A``: no test sees it."""
+    data = views_data(DEFAULT_CAMERA, 0.0, 0, grid)
+    problem = ce.camera_problem(data, sigma)
+    q = np.linalg.qr(fit_model(problem, (), problem.start).jacobian)[0]
+    shift = np.repeat(data.view == view, 2) * offset / sigma
+    left = shift - q @ (q.T @ shift)
+    return float(left @ left)
+
+
+def most_powerful_rate(lam: float, alpha: float = ALPHA) -> float:
+    """The largest probability with which any test at level ``alpha`` rejects "no shift" when
+    the data carry a shift of noncentrality ``lam``: that of the Neyman-Pearson test of this
+    very shift (known direction and size), ``Phi(sqrt(lam) - z_{1-alpha})``."""
+    return float(norm.cdf(math.sqrt(lam) - norm.isf(alpha)))
 
 
 def one_set(scenario: str, injection: Any, sigma: float, seed: int, grid: int = 8,
