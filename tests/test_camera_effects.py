@@ -235,7 +235,8 @@ def test_what_a_view_offset_leaves_against_opencvs_jacobian():
     """A view's corners all shifted alike: the noncentrality the refitted pinhole leaves,
     against the same projection computed from OpenCV's own Jacobian of ``projectPoints``
     (focal length as fx + fy, principal point, each view's rotation vector and translation),
-    and the Neyman-Pearson bound of any test of it (closed form: Phi(sqrt(lam) - z))."""
+    and the Neyman-Pearson bound of any test of it (closed form: Phi(sqrt(lam) - z)). The
+    first view faces the target (no tilt): there a shift is exactly a translation, lambda 0."""
     cv2 = pytest.importorskip("cv2")
     sigma, grid = 0.2, 16
     points, r, t = ca.design(grid)
@@ -255,7 +256,8 @@ def test_what_a_view_offset_leaves_against_opencvs_jacobian():
         shift = np.repeat(np.arange(n * v) // n == view, 2) / sigma
         left = shift - q @ (q.T @ shift)
         assert ca.offset_noncentrality(sigma, grid, view, 1.0) == pytest.approx(
-            float(left @ left), rel=1e-4)
+            float(left @ left), rel=1e-6, abs=1e-9)
+    assert ca.offset_noncentrality(sigma, grid, 0, 1.0) < 1e-9
     lam = ca.offset_noncentrality(sigma, grid)
     assert 3.0 < lam < 4.5  # a 1 px shift is 5 sigma a coordinate; the pose takes up 98 %
     assert ca.most_powerful_rate(lam, 0.01) == pytest.approx(
