@@ -167,3 +167,25 @@ def test_linear_pci_within_3_points_of_nonlinear(effect, figures):
     figures.record(f"{effect}.linear", linear)
     figures.record(f"{effect}.nonlinear", nonlinear, linear - 0.03, linear + 0.03)
     assert abs(linear - nonlinear) <= 0.03, (linear, nonlinear)
+
+
+def test_the_table_keeps_its_columns_whatever_the_length_of_an_entry():
+    """A three-parameter MDB is longer than a one-parameter one: every row's MIB and PCI still
+    start where the header's do, and a candidate without a PCI gives its reason there."""
+    def candidate(name, mdb, mib, pci):
+        return {"name": name, "mdb": mdb, "units": dict.fromkeys(mdb, "m"), "pci": pci,
+                "pci_size": "1 MDB", "mib": mib, "mib_mdb": 1.5, "mib_of": "final model MDB",
+                "identifiability_reason": "absorbed by gamma"}
+
+    three = {"l_x": 0.0924, "l_y": 0.0676, "l_z": 0.1}
+    report = {"identifiability": {"sets": 100, "pci_target": 0.8, "check": None},
+              "candidates": [candidate("lever_arm", three, {k: 2 * v for k, v in three.items()},
+                                       0.333),
+                             candidate("b", {"b_y": 0.06}, {"b_y": 0.12}, 0.79),
+                             candidate("rotation", {"r": 1.0}, None, None)]}
+    header, *rows = idf.format_table(report).splitlines()[1:]
+    mib, pci = header.index("MIB (linear)"), header.index("PCI (linear)")
+    assert [r[mib:].split(" (")[0] for r in rows] == [
+        "l_x 0.185 m, l_y 0.135 m, l_z 0.2 m", "b_y 0.12 m", "absorbed by gamma"]
+    assert [r[pci:] for r in rows[:2]] == ["0.333 at 1 MDB", "0.790 at 1 MDB"]
+    assert rows[0][pci - 1] == rows[1][pci - 1] == " "

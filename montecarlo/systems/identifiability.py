@@ -313,15 +313,11 @@ def annotate(report: dict[str, Any], d: Any, view: Any, target: float = PCI_TARG
 
 
 def format_table(report: Mapping[str, Any]) -> str:
-    """The candidates' MDB, MIB and PCI as text lines, each figure's mode in the header."""
+    """The candidates' MDB, MIB and PCI as text lines, each figure's mode in the header; the
+    columns as wide as their longest entry."""
     info = report["identifiability"]
     check = info.get("check")
-    lines = [f"identifiability, linear (linearised first step, {info['sets']} simulated sets "
-             f"per size; MIB at PCI {info['pci_target']:.2f})"
-             + (f"; nonlinear check: the whole diagnosis on {check['sets']} sets per size"
-                if check else "") + ":",
-             f"  {'candidate':<24} {'MDB':<28} {'MIB (linear)':<34} PCI (linear)"
-             + ("   PCI (nonlinear): at size, at the linear MIB" if check else "")]
+    rows = []
     for c in report["candidates"]:
         if "pci" not in c:
             continue
@@ -330,16 +326,26 @@ def format_table(report: Mapping[str, Any]) -> str:
             return ", ".join(f"{k} {v:.3g}" + ("" if c["units"][k] == "1" else
                                                f" {c['units'][k]}") for k, v in values.items())
 
-        mdb = show(c["mdb"])
         if c["pci"] is None:
-            lines.append(f"  {c['name']:<24} {mdb:<28} {c['identifiability_reason']}")
+            rows.append((c["name"], show(c["mdb"]), c["identifiability_reason"], None))
             continue
         mib = ("not reached" if c["mib"] is None else
                show(c["mib"]) + f" ({c['mib_mdb']:.2f} x {c['mib_of']})")
-        line = f"  {c['name']:<24} {mdb:<28} {mib:<34} {c['pci']:.3f} at {c['pci_size']}"
+        pci = f"{c['pci']:.3f} at {c['pci_size']}"
         if "check" in c:
             at_mib = c["check"]["pci_at_mib"]
-            line += f"   {c['check']['pci']:.3f}, " + ("-" if at_mib is None else
-                                                        f"{at_mib:.3f}")
-        lines.append(line)
+            pci += f"   {c['check']['pci']:.3f}, " + ("-" if at_mib is None else
+                                                       f"{at_mib:.3f}")
+        rows.append((c["name"], show(c["mdb"]), mib, pci))
+    wide = [max([len(head), *(len(r[k]) for r in rows if r[3] is not None or k < 2)])
+            for k, head in ((0, "candidate"), (1, "MDB"), (2, "MIB (linear)"))]
+    lines = [f"identifiability, linear (linearised first step, {info['sets']} simulated sets "
+             f"per size; MIB at PCI {info['pci_target']:.2f})"
+             + (f"; nonlinear check: the whole diagnosis on {check['sets']} sets per size"
+                if check else "") + ":",
+             f"  {'candidate':<{wide[0]}} {'MDB':<{wide[1]}} {'MIB (linear)':<{wide[2]}} "
+             "PCI (linear)" + ("   PCI (nonlinear): at size, at the linear MIB" if check else "")]
+    for name, mdb, mib, pci in rows:
+        head = f"  {name:<{wide[0]}} {mdb:<{wide[1]}} "
+        lines.append(head + mib if pci is None else head + f"{mib:<{wide[2]}} {pci}")
     return "\n".join(lines)
