@@ -135,9 +135,10 @@ def offset_noncentrality(sigma: float = 0.2, grid: int = 16, view: int = VIEW,
 
 
 def most_powerful_rate(lam: float, alpha: float = ALPHA) -> float:
-    """The largest probability with which any test at level ``alpha`` rejects "no shift" when
-    the data carry a shift of noncentrality ``lam``: that of the Neyman-Pearson test of this
-    very shift (known direction and size), ``Phi(sqrt(lam) - z_{1-alpha})``."""
+    """The largest probability with which a test at level ``alpha`` (whatever the model's
+    parameters: the poses are unknown) rejects "no shift" when the data carry a shift that
+    leaves noncentrality ``lam`` beside the model: that of the Neyman-Pearson test of this very
+    shift (known direction and size), ``Phi(sqrt(lam) - z_{1-alpha})``."""
     return float(norm.cdf(math.sqrt(lam) - norm.isf(alpha)))
 
 
