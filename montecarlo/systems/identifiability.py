@@ -338,12 +338,13 @@ def format_table(report: Mapping[str, Any]) -> str:
                                                        f"{at_mib:.3f}")
         rows.append((c["name"], show(c["mdb"]), mib, pci))
     wide = [max([len(head), *(len(r[k]) for r in rows if r[3] is not None or k < 2)])
-            for k, head in ((0, "candidate"), (1, "MDB"), (2, "MIB (linear)"))]
+            for k, head in ((0, "candidate"), (1, "MDB (base model)"), (2, "MIB (linear)"))]
     lines = [f"identifiability, linear (linearised first step, {info['sets']} simulated sets "
              f"per size; MIB at PCI {info['pci_target']:.2f})"
              + (f"; nonlinear check: the whole diagnosis on {check['sets']} sets per size"
                 if check else "") + ":",
-             f"  {'candidate':<{wide[0]}} {'MDB':<{wide[1]}} {'MIB (linear)':<{wide[2]}} "
+             f"  {'candidate':<{wide[0]}} {'MDB (base model)':<{wide[1]}} "
+             f"{'MIB (linear)':<{wide[2]}} "
              "PCI (linear)" + ("   PCI (nonlinear): at size, at the linear MIB" if check else "")]
     for name, mdb, mib, pci in rows:
         head = f"  {name:<{wide[0]}} {mdb:<{wide[1]}} "
