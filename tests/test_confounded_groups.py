@@ -147,7 +147,7 @@ def test_the_text_says_which_p_value_a_named_effect_has_and_why_each_was_dropped
 
     root = Path(__file__).parent.parent
     report = json.loads((root / "results/examples/discrepancy_ground/diagnosis.json").read_text())
-    assert "identification p = 2.24e-152 (Holm)" in format_text(report)
+    assert "identification p = 2.61e-152 (Holm)" in format_text(report)
     report["named_effects"][0]["swapped_in"] = True
     report["dropped_effects"] = [{"name": "target_range_bias", "p_value": 0.2},
                                  {"name": "outlier:T07", "p_value": math.nan},
