@@ -128,7 +128,7 @@ def offset_noncentrality(sigma: float = 0.2, grid: int = 16, view: int = VIEW,
     of ``A``: no test sees it."""
     data = views_data(DEFAULT_CAMERA, 0.0, 0, grid)
     problem = ce.camera_problem(data, sigma)
-    q = np.linalg.qr(fit_model(problem, (), problem.start).jacobian)[0]
+    q = fit_model(problem, (), problem.start).column_basis
     shift = np.repeat(data.view == view, 2) * offset / sigma
     left = shift - q @ (q.T @ shift)
     return float(left @ left)
