@@ -134,17 +134,16 @@ def _workdir(base: Path) -> None:
     shutil.copytree(ROOT / "results" / "examples", base / "results" / "examples")
 
 
-_RUNS: dict[tuple[str, ...], list] = {}  # the results of each group's commands run so far
+_RUNS: dict[tuple[str, ...], tuple[Path, list]] = {}  # each group's directory and results
 
 
 def run_in_group(group: tuple[str, ...], index: int, tmp_root: Path):
     """The result of ``group[index]``, run after the group's earlier commands (each run once
     per group, in one directory)."""
     if group not in _RUNS:
-        _RUNS[group] = []
-        _workdir(tmp_root / f"group-{len(_RUNS)}")
-    key = tmp_root / f"group-{list(_RUNS).index(group) + 1}"
-    runs = _RUNS[group]
+        _RUNS[group] = (tmp_root / f"group-{len(_RUNS) + 1}", [])
+        _workdir(_RUNS[group][0])
+    key, runs = _RUNS[group]
     while len(runs) <= index:
         command = group[len(runs)]
         args = []
