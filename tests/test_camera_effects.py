@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from montecarlo.camera_calibration.simulate import DEFAULT_CAMERA
 from montecarlo.discrepancy import camera_effects as ce
@@ -258,6 +259,19 @@ def test_what_a_view_offset_leaves_against_opencvs_jacobian():
         assert ca.offset_noncentrality(sigma, grid, view, 1.0) == pytest.approx(
             float(left @ left), rel=1e-6, abs=1e-9)
     assert ca.offset_noncentrality(sigma, grid, 0, 1.0) < 1e-9
+    # the clustering's shift test: what the pinhole leaves of a shift of each view's u and of
+    # its v (rank from OpenCV's Jacobian); its F test at alpha / 2 has power 0.8 at the MDB
+    cells = np.zeros((2 * n * v, 2 * v))
+    for k in range(2 * v):
+        cells[2 * n * (k // 2) + k % 2:2 * n * (k // 2 + 1):2, k] = 1.0
+    rank = int(np.sum(np.linalg.svd(cells - q @ (q.T @ cells), compute_uv=False)
+                      > 1e-3 * math.sqrt(n)))
+    dof = 2 * n * v - A.shape[1] - rank
+    left = np.repeat(np.arange(n * v) // n == ca.VIEW, 2) / sigma
+    left -= q @ (q.T @ left)
+    power = stats.ncf.sf(stats.f.isf(0.005, rank, dof), rank, dof,
+                         float(left @ left) * ca.offset_mdb(sigma, grid) ** 2)
+    assert (rank, power) == (5, pytest.approx(0.8, abs=1e-6))
     lam = ca.offset_noncentrality(sigma, grid)
     assert 3.0 < lam < 4.5  # a 1 px shift is 5 sigma a coordinate; the pose takes up 98 %
     assert ca.most_powerful_rate(lam, 0.01) == pytest.approx(

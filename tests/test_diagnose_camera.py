@@ -164,13 +164,17 @@ def test_acceptance_small():
 
 def test_acceptance_small_view_scenarios():
     """k2 at 3 MDB (k1 in the data) is named after k1; a view with three times the stated
-    noise leaves residuals that cluster by view and names no lens term."""
+    noise, or its corners all shifted by 3 MDB of the clustering's shift test, leaves residuals
+    that cluster by view and names no lens term."""
     inj = ca.injections(SIGMA, 8)
     assert inj["radial_k2"]["k1"] == ca.K1 and inj["radial_k2"]["k2"] > 0
     row = ca.one_set("radial_k2", inj["radial_k2"], SIGMA, 12, 8)
     assert row["named"][:2] == ["radial_k1", "radial_k2"], row
     row = ca.one_set("view_noise", (0.0, 3.0), SIGMA, 12, 8)
     assert row["clustered"] and not row["named"], row
+    assert inj["view_offset"][0] == pytest.approx(3 * ca.offset_mdb(SIGMA, 8))
+    row = ca.one_set("view_offset", inj["view_offset"], SIGMA, 12, 8)
+    assert row["clustered"] and not row["named"] and not row["flagged"], row
 
 
 @pytest.mark.slow

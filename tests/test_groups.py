@@ -44,8 +44,10 @@ def test_one_way_anova_matches_scipy_and_statsmodels() -> None:
 def _stub(residual: np.ndarray, n_groups: int, per: int) -> tuple[Any, dict[str, list[int]]]:
     """A diagnosis of ``n_groups`` groups of ``per`` observations of two components each."""
     obs = tuple((f"g{i // per}/{i}", i + 1, (2 * i, 2 * i + 1)) for i in range(n_groups * per))
+    n = residual.size
     d = SimpleNamespace(problem=SimpleNamespace(observations=obs), alpha=0.05,
-                        after=SimpleNamespace(residual=residual, effects=("base",)))
+                        after=SimpleNamespace(residual=residual - residual.mean(), effects=(
+                            "base",), column_basis=np.full((n, 1), 1 / np.sqrt(n)), dof=n - 1))
     return d, {f"g{g}": list(range(g * per, (g + 1) * per)) for g in range(n_groups)}
 
 
@@ -83,28 +85,53 @@ def test_clustering_rejection_rate(offset: float) -> None:
         assert rate >= 0.9
 
 
-def _toy() -> tuple[Problem, np.ndarray, np.ndarray, np.ndarray]:
-    """y = a_g + b x + c x^2 + noise in 4 groups: intercepts local, b shared, c a candidate."""
+def _toy(own_intercepts: bool = True) -> tuple[Problem, np.ndarray, np.ndarray, np.ndarray]:
+    """y = a_g + b x + c x^2 + noise in 4 groups: intercepts local (or one shared, then
+    fitted as ``a0``), b shared, c a candidate."""
     rng = np.random.default_rng(4)
     g = np.repeat(np.arange(4), 12)
     x = rng.uniform(-1, 1, g.size)
     y = np.array([1.0, -2.0, 0.5, 3.0])[g] + 0.7 * x + 0.3 * x ** 2 + 0.1 * rng.normal(size=x.size)
     sigma = 0.1
-    names = [f"a{k}" for k in range(4)]
+    intercepts_of = [f"a{k}" for k in range(4)]
 
     def residuals(values: Any) -> np.ndarray:
-        given = [np.asarray(values.get(n, 0.0), float) for n in (*names, "b", "c")]
+        given = [np.asarray(values.get(n, 0.0), float) for n in (*intercepts_of, "b", "c")]
         batched = any(v.ndim for v in given)
         cols = np.broadcast_arrays(*(v.reshape(-1, 1) for v in given))
-        pred = np.hstack(cols[:4])[:, g] + cols[4] * x + cols[5] * x ** 2
+        intercepts = np.hstack(cols[:4])[:, g] if own_intercepts else cols[0]
+        pred = intercepts + cols[4] * x + cols[5] * x ** 2
         r = (y - pred) / sigma
         return r if batched else r[0]
 
-    base = Effect("line", (*names, "b"), ((-np.inf, np.inf),) * 5, (1e-4,) * 5)
+    names = intercepts_of if own_intercepts else intercepts_of[:1]
+    base = Effect("line", (*names, "b"), ((-np.inf, np.inf),) * (len(names) + 1),
+                  (1e-4,) * (len(names) + 1))
     quad = Effect("quad", ("c",), ((-10.0, 10.0),), (1e-4,))
     obs = tuple((f"{g[i]}/{i}", i + 1, (i,)) for i in range(x.size))
     return Problem("toy", base, (quad,), residuals, dict.fromkeys((*names, "b"), 0.0),
                    observations=obs), g, x, y
+
+
+@pytest.mark.parametrize("own_intercepts", [False, True])
+def test_the_shift_test_is_statsmodels_partial_f_test(own_intercepts: bool) -> None:
+    """A shift per group added to the final model: statsmodels' F test of ``y ~ x + x^2``
+    against ``y ~ x + x^2 + C(g)``, the same data. With an intercept of its own per group the
+    model takes up every shift: no offset test, and the scatter test carries alpha."""
+    problem, g, x, y = _toy(own_intercepts)
+    d = SimpleNamespace(problem=problem, after=fit_model(problem, ["quad"]), alpha=0.01)
+    c = clustering(d, {str(k): np.flatnonzero(g == k).tolist() for k in range(4)}, "group")
+    if own_intercepts:
+        assert c["offset"] is None and "offset not tested" in format_clustering(c)
+        assert c["rejected"] == (c["scatter"]["p_value"] < 0.01)
+        return
+    frame = pd.DataFrame({"y": y, "x": x, "g": g})
+    ref = anova_lm(ols("y ~ x + I(x**2)", frame).fit(), ols("y ~ x + I(x**2) + C(g)",
+                                                             frame).fit())
+    assert c["offset"]["F"] == pytest.approx(ref["F"].iloc[1], rel=1e-6)
+    assert c["offset"]["p_value"] == pytest.approx(ref["Pr(>F)"].iloc[1], rel=1e-6)
+    assert (c["offset"]["dof1"], c["offset"]["dof2"]) == (3, x.size - 6)
+    assert c["offset"]["p_value"] < 1e-6  # the groups' intercepts differ by tens of sigma
 
 
 def test_leave_one_group_out_matches_lstsq() -> None:
@@ -169,7 +196,9 @@ def test_collimation_cli_reports_clustering_by_mirror(tmp_path, capsys) -> None:
     assert main(["diagnose", "collimation", str(data), "--angle-sigma-arcsec", "5",
                  "--readings", "absolute", "--json", str(out)]) == 0
     c = json.loads(out.read_text())["clustering"]
-    assert (c["kind"], c["groups"], c["offset"]["dof1"]) == ("mirror", 7, 13)
+    # 7 mirrors x 2 components; the named axis misalignment shifts every mirror alike in
+    # each component, so the model takes up two of the 14 cells' shifts
+    assert (c["kind"], c["groups"], c["offset"]["dof1"]) == ("mirror", 7, 12)
     capsys.readouterr()
     assert main(["diagnose", "collimation", str(shipped), "--angle-sigma-arcsec", "5",
                  "--readings", "absolute"]) == 0

@@ -11,8 +11,9 @@ in five views (:func:`montecarlo.camera_calibration.simulate.standard_poses`), f
   times its own MDB (data snooping);
 * ``radial_k2``: ``k1`` at ``K1`` and ``k2`` at ``multiple`` times its MDB against the model
   with ``k1`` (k2 is tested only with k1 in the model);
-* ``view_offset``: every corner of view 3 shifted by ``VIEW_OFFSET`` px along (1, 1) (an
-  error of that view, not of the lens);
+* ``view_offset``: every corner of view 3 shifted along (1, 1) by ``multiple`` times the MDB
+  of the shift test of the residuals' clustering by view (an error of that view, not of the
+  lens; :func:`offset_mdb`);
 * ``view_noise``: view 3's noise ``VIEW_NOISE`` times the stated sigma (a sigma model too
   optimistic for one view).
 
@@ -40,13 +41,20 @@ from montecarlo.camera_calibration.simulate import (
     target_grid,
 )
 from montecarlo.discrepancy import camera_effects as ce
-from montecarlo.discrepancy.candidate_tests import ALPHA, analyse_candidates, family_levels
+from montecarlo.discrepancy.candidate_tests import (
+    ALPHA,
+    POWER,
+    analyse_candidates,
+    family_levels,
+)
 from montecarlo.discrepancy.design import design_mdb
 from montecarlo.discrepancy.engine import diagnose
+from montecarlo.discrepancy.estimated_sigma import noncentrality_f
 from montecarlo.discrepancy.fit import fit_model
-from montecarlo.discrepancy.groups import clustering_by
-from montecarlo.discrepancy.problem import OUTLIER, with_outliers
+from montecarlo.discrepancy.groups import clustering_by, group_cells, left_shifts
+from montecarlo.discrepancy.problem import OUTLIER, Problem, with_outliers
 from montecarlo.io.camera_csv import CameraData
+from montecarlo.lsq import LeastSquaresFit
 
 SCENARIOS = ("null", "radial", "tangential", "bad_corner")
 MORE_SCENARIOS = ("radial_k2", "view_offset", "view_noise")
@@ -56,7 +64,8 @@ K1 = -0.2
 VIEW = 2
 """The view (0-based) the view scenarios change."""
 VIEW_OFFSET = 1.0
-"""Offset of that view's corners [px] along each axis in ``view_offset``."""
+"""An offset of that view's corners [px] along each axis: the size :func:`offset_noncentrality`
+takes by default (5 sigma per coordinate at 0.2 px)."""
 VIEW_NOISE = 2.0
 """Noise of that view in ``view_noise`` [stated sigma]."""
 
@@ -114,9 +123,16 @@ def injections(sigma: float, grid: int = 8, multiple: float = 3.0) -> dict[str, 
     with_k1 = ce.camera_problem(views_data(k1, 0.0, 0, grid), sigma)
     out["radial_k2"] = {"k1": K1, **{k: multiple * v for k, v in design_mdb(
         with_k1, {**with_k1.start, "k1": K1}, ("radial_k1",), "radial_k2").items()}}
-    out["view_offset"] = (VIEW_OFFSET, 1.0)
+    out["view_offset"] = (multiple * offset_mdb(sigma, grid), 1.0)
     out["view_noise"] = (0.0, VIEW_NOISE)
     return out
+
+
+def _pinhole(sigma: float, grid: int) -> tuple[CameraData, Problem, LeastSquaresFit]:
+    """The noise-free design, its problem and the pinhole's fit."""
+    data = views_data(DEFAULT_CAMERA, 0.0, 0, grid)
+    problem = ce.camera_problem(data, sigma)
+    return data, problem, fit_model(problem, (), problem.start)
 
 
 def offset_noncentrality(sigma: float = 0.2, grid: int = 16, view: int = VIEW,
@@ -126,12 +142,25 @@ def offset_noncentrality(sigma: float = 0.2, grid: int = 16, view: int = VIEW,
     refitted: ``|(I - P_A) s|^2``, ``s`` the whitened shift and ``A`` the whitened Jacobian of
     the noise-free design. What a view's pose takes up of the shift is in the column space
     of ``A``: no test sees it."""
-    data = views_data(DEFAULT_CAMERA, 0.0, 0, grid)
-    problem = ce.camera_problem(data, sigma)
-    q = fit_model(problem, (), problem.start).column_basis
+    data, _, fit = _pinhole(sigma, grid)
+    q = fit.column_basis
     shift = np.repeat(data.view == view, 2) * offset / sigma
     left = shift - q @ (q.T @ shift)
     return float(left @ left)
+
+
+def offset_mdb(sigma: float = 0.2, grid: int = 16, view: int = VIEW) -> float:
+    """Minimal detectable offset [px] of every corner of ``view`` along (1, 1) for the shift
+    test of the residuals' clustering by view (:func:`~montecarlo.discrepancy.groups.
+    group_shift` beside the pinhole, at alpha / 2 beside the scatter test, power
+    :data:`~montecarlo.discrepancy.candidate_tests.POWER`): ``sqrt(lambda0 / lambda_1px)``,
+    ``lambda0`` that of its F test and ``lambda_1px`` :func:`offset_noncentrality` of 1 px
+    (the shift lies in the test's columns, so the test sees all the pinhole leaves of it)."""
+    data, problem, fit = _pinhole(sigma, grid)
+    rank = left_shifts(fit, list(group_cells(problem, ce.view_groups(data), set()).values())
+                       )[1].size
+    lam0 = noncentrality_f(ALPHA / 2, rank, fit.dof - rank, POWER)
+    return math.sqrt(lam0 / offset_noncentrality(sigma, grid, view, 1.0))
 
 
 def most_powerful_rate(lam: float, alpha: float = ALPHA) -> float:
@@ -183,7 +212,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
             entry["right_named"] = sum(RIGHT[s] in r["named"] for r in sets) / n
             entry["only_right"] = sum(r["named"] == [RIGHT[s]] and not r["flagged"]
                                       for r in sets) / n
-        if s.startswith("view_"):
+        if s.startswith("view_") or s == "null":
             entry["clustered"] = sum(r["clustered"] for r in sets) / n
             entry["clustered_no_lens_term"] = sum(r["clustered"] and not r["named"]
                                                   for r in sets) / n
