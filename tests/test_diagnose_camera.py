@@ -210,3 +210,18 @@ def test_the_readme_chain(tmp_path):
     errors = tomllib.loads((tmp_path / "camera_errors.toml").read_text())
     assert errors["errors"]["pixel_px"]["sigma"] == pytest.approx(0.356, abs=0.0005)
     assert (tmp_path / "results" / "sizing" / "answers.csv").is_file()
+
+
+def test_summarise_counts_by_hand():
+    """Shares of hand-made rows; rows of a generator that does not say whether the residuals
+    clustered (the blind one's) have no ``clustered`` share."""
+    row = {"scenario": "null", "flagged": [], "right_corner": None}
+    rows = [{**row, "named": []}, {**row, "named": ["radial_k1"]}]
+    assert ca.summarise(rows) == {"null": {"sets": 2, "anything_named": 0.5,
+                                           "any_corner_flagged": 0.0}}
+    view = {**row, "scenario": "view_offset"}
+    rows = [{**view, "named": [], "clustered": True}, {**view, "named": ["tangential"],
+                                                       "clustered": True},
+            {**view, "named": [], "clustered": False}, {**view, "named": [], "clustered": True}]
+    table = ca.summarise(rows)["view_offset"]
+    assert (table["clustered"], table["clustered_no_lens_term"]) == (0.75, 0.5)

@@ -212,8 +212,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
             entry["right_named"] = sum(RIGHT[s] in r["named"] for r in sets) / n
             entry["only_right"] = sum(r["named"] == [RIGHT[s]] and not r["flagged"]
                                       for r in sets) / n
-        if s.startswith("view_") or s == "null":
+        if all("clustered" in r for r in sets):  # a generator's rows may not say
             entry["clustered"] = sum(r["clustered"] for r in sets) / n
+        if s.startswith("view_"):
             entry["clustered_no_lens_term"] = sum(r["clustered"] and not r["named"]
                                                   for r in sets) / n
         if s == "bad_corner":
