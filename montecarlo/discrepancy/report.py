@@ -80,6 +80,10 @@ class Diagnosis:
     """The confounded group of each named effect, given the final model (see :class:`Group`)."""
     noise_estimated: bool = False
     """The tests took the noise as estimated from the data (F, Pope's tau), not as known."""
+    without: dict[str, LeastSquaresFit] = field(default_factory=dict, repr=False)
+    """The final model refitted without each named effect, from the final values (as
+    :func:`~montecarlo.discrepancy.significance.practical_significance` refits it), where no
+    parameter is held at zero."""
 
     @property
     def detected(self) -> bool:
@@ -117,27 +121,31 @@ def report(state: DiagnosisState) -> Diagnosis:
     not dropped) and the confounded group of each named effect."""
     absorbed = [t.name for t in state.steps[-1].tests if t.status == "absorbed"
                 and t.name not in state.named and t.name not in state.dropped]
-    groups = [group_of(state, name) for name in state.named]
+    refits = {name: group_of(state, name) for name in state.named}
+    groups = [g for g, _ in refits.values()]
+    without = {name: fit for name, (_, fit) in refits.items()
+               if fit is not None and not state.fixed}
     return Diagnosis(state.problem, state.rules.alpha, state.before, state.fit, state.steps,
                      state.named, [g.members for g in groups], absorbed, state.outliers,
-                     state.dropped, state.swaps, groups, state.rules.noise_estimated)
+                     state.dropped, state.swaps, groups, state.rules.noise_estimated, without)
 
 
-def group_of(state: DiagnosisState, name: str) -> Group:
+def group_of(state: DiagnosisState, name: str) -> tuple[Group, LeastSquaresFit | None]:
     """The confounded group of the named effect ``name`` given the rest of the final model:
     refit without it and collect the candidates (not named) whose statistics correlate with
-    its own above ``confounded`` and that the data do not separate from it."""
+    its own above ``confounded`` and that the data do not separate from it. Also returns
+    that refit (None where it failed)."""
     rules, fit, problem = state.rules, state.fit, state.full
     try:
         without = fit_with_fixed(problem, [e for e in fit.effects[1:] if e != name],
                                  fit.params, state.fixed)
     except (FitError, np.linalg.LinAlgError):
-        return Group(name, (name,))
+        return Group(name, (name,)), None
     tests = analyse_candidates(state.effects, without, rules.alpha, rules.power, rules.absorbed,
                                test="F" if rules.noise_estimated else "chi2")
     own = next(t for t in tests if t.name == name)
     if own.status != "testable":
-        return Group(name, (name,))
+        return Group(name, (name,)), without
     correlation = {}
     for t in tests:
         if t.status == "testable" and t.name not in state.named:
@@ -146,4 +154,5 @@ def group_of(state: DiagnosisState, name: str) -> Group:
                                                         rules.absorbed):
                 correlation[t.name] = rho
     return Group(name, (name, *correlation), correlation,
-                 {m: problem.separating_data.get(frozenset((name, m)), "") for m in correlation})
+                 {m: problem.separating_data.get(frozenset((name, m)), "")
+                  for m in correlation}), without

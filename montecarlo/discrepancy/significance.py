@@ -54,8 +54,10 @@ def practical_significance(d: Diagnosis, view: SystemView,
         effects = [e for e in after.effects[1:] if e != name]
         entry: dict[str, Any] = {"name": name, "rms_with": rms_with, "rms_unit": view.rms_unit}
         try:
-            without = fit_model(full, effects, {k: v for k, v in after.params.items()
-                                                if k not in d.problem.effect(name).parameters})
+            without = d.without.get(name)
+            if without is None:
+                without = fit_model(full, effects, {k: v for k, v in after.params.items()
+                                                    if k not in d.problem.effect(name).parameters})
         except FitError as exc:
             out.append({**entry, "label": "significant", "reason": str(exc)})
             continue
