@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -17,6 +18,7 @@ from statsmodels.formula.api import ols
 from statsmodels.stats.anova import anova_lm
 
 from montecarlo.cli import main
+from montecarlo.discrepancy.engine import diagnose
 from montecarlo.discrepancy.fit import fit_model
 from montecarlo.discrepancy.groups import (
     clustering,
@@ -26,6 +28,7 @@ from montecarlo.discrepancy.groups import (
 )
 from montecarlo.discrepancy.out_of_sample import format_leave_one_out, leave_one_group_out
 from montecarlo.discrepancy.problem import Effect, Problem
+from montecarlo.discrepancy.significance import practical_significance
 
 
 def test_one_way_anova_matches_scipy_and_statsmodels() -> None:
@@ -203,3 +206,26 @@ def test_collimation_cli_reports_clustering_by_mirror(tmp_path, capsys) -> None:
     assert main(["diagnose", "collimation", str(shipped), "--angle-sigma-arcsec", "5",
                  "--readings", "absolute"]) == 0
     assert "cluster" not in capsys.readouterr().out
+
+
+def test_practical_significance_takes_the_diagnosis_refit_and_it_is_ordinary_least_squares(
+        ) -> None:
+    """The refit without the named quadratic term that the diagnosis keeps is numpy's least
+    squares of ``y ~ C(g) + x``; practical significance gives the same with or without it."""
+    problem, g, x, y = _toy()
+    d = diagnose(problem, 0.01)
+    assert d.named == ["quad"] and set(d.without) == {"quad"}
+    design = np.column_stack([(g == k).astype(float) for k in range(4)] + [x])
+    coef = np.linalg.lstsq(design, y, rcond=None)[0]
+    got = d.without["quad"].params
+    assert [got[n] for n in ("a0", "a1", "a2", "a3", "b")] == pytest.approx(coef, rel=1e-6)
+
+    def raw(p: dict[str, float]) -> np.ndarray:
+        a = np.array([p[f"a{k}"] for k in range(4)])[g]
+        return y - a - p["b"] * x - p.get("c", 0.0) * x ** 2
+
+    view = SimpleNamespace(rms_unit="m", rms_scale=1.0, raw_residuals=raw,
+                           display_unit=lambda name: ("", 1.0))
+    kept = practical_significance(d, view)  # type: ignore[arg-type]
+    assert kept == practical_significance(replace(d, without={}), view)  # type: ignore[arg-type]
+    assert kept[0]["rms_without"] == pytest.approx(np.sqrt(np.mean((y - design @ coef) ** 2)))
