@@ -111,7 +111,12 @@ def test_bit_identical_for_any_jobs_and_chunks(small_study, kernel, reference, t
     pd.testing.assert_frame_equal(got, reference, check_exact=True)
 
 
+@pytest.mark.parametrize("kernel", ["fast", pytest.param("reference", marks=pytest.mark.slow)],
+                         indirect=True)
 def test_bit_identical_on_dask_local_cluster(small_study, kernel, reference, tmp_path):
+    """The dask backend gives the result of one in-process job. Slow on the reference path (a
+    second local cluster): by default, the dask backend is checked on the fast path here and the
+    reference path through workers by ``test_bit_identical_for_any_jobs_and_chunks``."""
     got = _summary(small_study, tmp_path, kernel, workers=min(2, runner.available_cores()),
                    n_jobs=2, backend="dask", chunk_size=1000)
     pd.testing.assert_frame_equal(got, reference, check_exact=True)
