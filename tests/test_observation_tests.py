@@ -8,6 +8,7 @@ on real data: a part of Zhang's 1998 calibration set (tests/data/camera).
 from __future__ import annotations
 
 import math
+import pickle
 from dataclasses import replace
 from pathlib import Path
 
@@ -80,6 +81,26 @@ def test_batched_observation_tests_equal_the_reference(snooping, test, absorbed)
         # the same space: each basis projects the other's columns onto themselves
         assert b.basis.shape == a.basis.shape
         np.testing.assert_allclose(b.basis @ (b.basis.T @ a.basis), a.basis, atol=1e-12)
+
+
+def test_fields_read_later_survive_copies_and_pickling(snooping):
+    """A batched test fills its estimate, MDB, influence and kept shares when first read (the
+    test above checks them against the reference); a copy or a pickled test made before that
+    fills the same values, and a name that is no field is still an AttributeError."""
+    observations, fit = snooping
+    fresh = analyse_observations(observations, fit)
+    filled = analyse_observations(observations, fit)
+    testable = [k for k, t in enumerate(filled) if t.status == "testable"]
+    assert len(testable) > 10
+    for k in testable:
+        assert "_later" in fresh[k].__dict__
+        copy = pickle.loads(pickle.dumps(fresh[k].with_fields(p_adjusted=0.5)))
+        for f in ("retained", "estimate", "stderr", "mdb"):
+            assert getattr(copy, f) == getattr(filled[k], f)
+        assert dict(copy.influence) == dict(filled[k].influence)
+        assert copy.p_adjusted == 0.5 and "_later" not in copy.__dict__
+    with pytest.raises(AttributeError):
+        fresh[testable[0]].not_a_field  # noqa: B018
 
 
 def test_columns_only_below_the_threshold(snooping):

@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -195,6 +195,19 @@ class CandidateTest:
     test: str = "chi2"
     dof2: int = 0
 
+    if not TYPE_CHECKING:  # a type checker still flags a misspelt field
+
+        def __getattr__(self, name: str) -> Any:
+            """A field left to be filled when first read (``_later`` = (source, row): a step
+            tests thousands of observations and reads the estimates and MDBs of a few; see
+            :mod:`~montecarlo.discrepancy.observation_tests`)."""
+            later = self.__dict__.get("_later")
+            if later is None or name not in self.__dataclass_fields__:
+                raise AttributeError(name)
+            self.__dict__.update(later[0].fields(later[1]))
+            del self.__dict__["_later"]
+            return self.__dict__[name]
+
     @classmethod
     def of(cls, *values: Any) -> CandidateTest:
         """``CandidateTest(*values)`` with every field given, without ``__init__`` (a step
@@ -318,7 +331,7 @@ def analyse_candidates(problem: Problem, fit: LeastSquaresFit, alpha: float = AL
         adjusted = holm(np.exp(log_ps))
         for (c, *_), p in zip(work, adjusted, strict=True):
             t = tests[c.name]
-            tests[c.name] = CandidateTest(**{**t.__dict__, "p_adjusted": float(p)})
+            tests[c.name] = t.with_fields(p_adjusted=float(p))
     return [tests[c.name] for c in problem.candidates]
 
 

@@ -96,11 +96,9 @@ def detection_family(effects: Problem, observations: Problem, fit: LeastSquaresF
             c for c in observations.candidates if c.name in wanted))
         columns = {t.name: t for t in analyse_observations(some, fit, absorbed=absorbed)}
 
-    def update(ts: list[CandidateTest]) -> list[CandidateTest]:
-        return [t.with_fields(p_adjusted=adjusted[t.name],
-                              **({"basis": columns[t.name].basis,
-                                  "projected": columns[t.name].projected}
-                                 if t.name in columns else {}))
-                if t.name in adjusted else t for t in ts]
-
-    return update(tests), update(snoop), global_p
+    for t in (*tests, *snoop):  # made above for this family alone: set, not copied
+        if t.name in adjusted:
+            t.__dict__["p_adjusted"] = adjusted[t.name]
+        if t.name in columns:
+            t.__dict__.update(basis=columns[t.name].basis, projected=columns[t.name].projected)
+    return tests, snoop, global_p

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -126,7 +127,7 @@ def analyse_observations(problem: Problem, fit: LeastSquaresFit, alpha: float = 
         adjusted = holm(np.exp([log_p[k] for k in work]))
         for k, p in zip(work, adjusted, strict=True):
             t = tests[pending[k].name]
-            tests[t.name] = CandidateTest(**{**t.__dict__, "p_adjusted": float(p)})
+            tests[t.name] = t.with_fields(p_adjusted=float(p))
     return [tests[c.name] for c in problem.candidates]
 
 
@@ -237,29 +238,47 @@ def _batch(pending: list[Effect], members: list[int], q: int, start: NDArray[np.
     bound = np.array([[max(abs(lo), abs(hi)) for lo, hi in pending[k].bounds] for k in members])
     with np.errstate(invalid="ignore"):
         reach = np.sum(bound * np.sqrt(diag), axis=1) ** 2
-    index = {n: j for j, n in enumerate(fit.names)}
-    kept_q = kept[cols].reshape(len(members), q).tolist()
-    rows = zip(est.tolist(), stderr.tolist(), mdb.tolist(), influence.T,
-               stat.tolist(), np.exp(log_p).tolist(), log_p.tolist(), kept_q,
-               strict=True)
+    later = _Fields(tuple(pending[k].parameters for k in members), kept[cols].reshape(
+        len(members), q), est, stderr, mdb, influence, {n: j for j, n in enumerate(fit.names)})
     out = []
-    for i, (k, (e, se, m, infl, st, pv, lp, kq)) in enumerate(zip(members, rows, strict=True)):
+    for i, (k, st, pv, lp) in enumerate(zip(members, stat.tolist(), np.exp(log_p).tolist(),
+                                            log_p.tolist(), strict=True)):
         c = pending[k]
         status, reason = "testable", ""
         if reach[i] < lam0:
             status = "undetectable"
             reason = (f"noncentrality at most {reach[i]:.3g} within its physical bounds, "
                       f"{lam0:.3g} needed")
-        names = c.parameters
-        out.append(CandidateTest.of(
-            c.name, status, names, dict(zip(names, kq, strict=True)), {}, st, q,
-            pv, lp, math.nan, dict(zip(names, e, strict=True)),
-            dict(zip(names, se, strict=True)), dict(zip(names, m, strict=True)),
-            RowOfValues(index, infl),
-            lam0, reason, size, *((basis[:, slot[i] * q:(slot[i] + 1) * q].copy(),
-                                   projected[:, slot[i] * q:(slot[i] + 1) * q].copy())
-                                  if i in slot else (None, None)), test, dof2))
+        t = object.__new__(CandidateTest)
+        t.__dict__.update(
+            name=c.name, status=status, active=c.parameters, absorbed_by={}, statistic=st,
+            dof=q, p_value=pv, log_p=lp, p_adjusted=math.nan, lambda0=lam0, reason=reason,
+            level=size, basis=None, projected=None, test=test, dof2=dof2, _later=(later, i))
+        if i in slot:
+            t.__dict__.update(basis=basis[:, slot[i] * q:(slot[i] + 1) * q].copy(),
+                              projected=projected[:, slot[i] * q:(slot[i] + 1) * q].copy())
+        out.append(t)
     return out, log_p.tolist()
+
+
+class _Fields:
+    """The fields of a batch's tests that a step reads for a few of them only (estimate,
+    stderr, MDB, influence, share of each column kept), made for one test when it is first
+    asked for one (:meth:`CandidateTest.__getattr__`)."""
+
+    def __init__(self, names: tuple[tuple[str, ...], ...], kept: FloatArray,
+                 estimate: FloatArray, stderr: FloatArray, mdb: FloatArray,
+                 influence: FloatArray, index: dict[str, int]) -> None:
+        self.names, self.kept, self.estimate, self.stderr = names, kept, estimate, stderr
+        self.mdb, self.influence, self.index = mdb, influence, index
+
+    def fields(self, i: int) -> dict[str, Any]:
+        names = self.names[i]
+        return {"retained": dict(zip(names, self.kept[i].tolist(), strict=True)),
+                "estimate": dict(zip(names, self.estimate[i].tolist(), strict=True)),
+                "stderr": dict(zip(names, self.stderr[i].tolist(), strict=True)),
+                "mdb": dict(zip(names, self.mdb[i].tolist(), strict=True)),
+                "influence": RowOfValues(self.index, self.influence[:, i])}
 
 
 def _bases(N: FloatArray, Q: FloatArray, Qf: FloatArray, cols: NDArray[np.int64],
