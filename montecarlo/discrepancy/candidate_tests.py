@@ -208,17 +208,10 @@ class CandidateTest:
             del self.__dict__["_later"]
             return self.__dict__[name]
 
-    @classmethod
-    def of(cls, *values: Any) -> CandidateTest:
-        """``CandidateTest(*values)`` with every field given, without ``__init__`` (a step
-        builds the tests of thousands of observations)."""
-        new = object.__new__(cls)
-        new.__dict__.update(zip(cls.__dataclass_fields__, values, strict=True))
-        return new
-
     def with_fields(self, **changes: Any) -> CandidateTest:
-        """A copy with ``changes`` (as :func:`dataclasses.replace`, without ``__init__``: a
-        step updates the adjusted p-value of thousands of observations' tests)."""
+        """A copy with ``changes`` (as :func:`dataclasses.replace`, without ``__init__``, so a
+        field not yet filled stays so: the adjusted p-values of thousands of observations'
+        tests)."""
         unknown = set(changes) - set(self.__dataclass_fields__)
         if unknown:
             raise TypeError(f"CandidateTest has no field {sorted(unknown)[0]!r}")
